@@ -104,6 +104,56 @@ def test_convert_takes_bank_before_the_subcommand_too():
     assert args.bank == "C"
 
 
+def _command(name, reads_bank):
+    """A command group as docs/cli.md describes one: ``dv2s NAME`` prints the names of the bank it reads, which it
+    declares (``bank_option``) and opens with ``open_bank`` when ``reads_bank``, else opens with ``Bank()``."""
+    from types import SimpleNamespace
+
+    from dv2s_gym.cli.inputs import open_bank
+    from dv2s_gym.cli.parser import bank_option
+    from scenario_bank.bank import Bank
+
+    def add_parser(subparsers):
+        p = subparsers.add_parser(name, help="the bank's names")
+        if reads_bank:
+            bank_option(p)
+        p.set_defaults(func=run)
+
+    def run(args):
+        print(" ".join(sorted(entry.name for entry in (open_bank(args) if reads_bank else Bank()))))
+        return 0
+
+    return SimpleNamespace(add_parser=add_parser, run=run)
+
+
+def test_bank_before_a_command_that_reads_none_is_refused(capsys, monkeypatch, small_bank):
+    import dv2s_gym.cli as cli
+
+    monkeypatch.setattr(cli, "COMMAND_GROUPS", cli.COMMAND_GROUPS + (_command("mycmd", reads_bank=False),))
+    for argv in (["--bank", "/nonexistent", "mycmd"], ["--bank", small_bank, "mycmd"],
+                 ["--bank", small_bank, "demo"], ["--bank", small_bank, "replay", "t.json"]):
+        code, out, err = run(capsys, *argv)
+        line = one_line_error(err)
+        assert code == 2 and out == "", argv
+        assert f"`dv2s {argv[2]}` reads none" in line and "drop --bank" in line and str(argv[1]) in line, line
+        assert "run, bank, convert, regress, mine, train, loop" in line, line
+    code, out, _ = run(capsys, "mycmd")
+    assert code == 0 and "highway_lead_vehicle_brakes" in out.split()
+
+
+def test_bank_before_a_command_that_reads_one_reaches_it(capsys, monkeypatch, small_bank):
+    import dv2s_gym.cli as cli
+
+    monkeypatch.setattr(cli, "COMMAND_GROUPS", cli.COMMAND_GROUPS + (_command("mycmd", reads_bank=True),))
+    for argv in (["--bank", small_bank, "mycmd"], ["mycmd", "--bank", small_bank]):
+        code, out, err = run(capsys, *argv)
+        assert code == 0 and out.split() == ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"], err
+    code, _, err = run(capsys, "--bank", "/nonexistent", "mycmd")
+    assert code == 2 and "there is no bank at /nonexistent" in one_line_error(err)
+    code, out, _ = run(capsys, "mycmd")
+    assert code == 0 and len(out.split()) > 2  # without --bank: the shipped bank
+
+
 def test_a_folder_that_is_not_a_bank_is_refused(capsys, tmp_path):
     folder = tmp_path / "photos"
     (folder / "2024").mkdir(parents=True)

@@ -335,6 +335,25 @@ def test_minilm_retrieval_puts_pedestrian_scenarios_first(examples, monkeypatch)
     assert "pedestrian" in retriever.top_k("Someone walks across the street ahead of our car.", k=1)[0].name
 
 
+def test_examples_come_from_a_bank_folder_and_a_folder_that_is_not_a_bank_is_refused(tmp_path):
+    import shutil
+
+    from scenario_bank.bank import BANK_DIR
+    from scenario_bank.errors import NotABankError
+
+    bank = tmp_path / "bank"
+    shutil.copytree(BANK_DIR / "highway_lead_vehicle_brakes", bank / "highway_lead_vehicle_brakes")
+    (found,) = bank_examples(bank)
+    assert found.name == "highway_lead_vehicle_brakes" and found.description and "ego" in found.script
+    assert bank_examples(tmp_path / "new") == []  # a new (empty) bank: no examples
+    loose = tmp_path / "loose"
+    loose.mkdir()
+    (loose / "cut_in.scenic").write_text('"""A car cuts in."""\nparam map = "highway_straight"\n')
+    (loose / "cut_in.json").write_text("{not json")
+    with pytest.raises(NotABankError, match="is not a scenario bank"):
+        bank_examples(loose)
+
+
 # ------------------------------------------------------------------------- SG
 def test_extract_scenic_block():
     assert extract_scenic_block("Here:\n```scenic\nparam map = 'x'\n```\nDone.") == "param map = 'x'\n"

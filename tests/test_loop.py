@@ -111,6 +111,25 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
     assert "40 pairs from 2 families (4 scenarios)" in _heldout_lines(few)[1]
     assert _round_row(RoundRecord.from_dict({"round": 1, "steps": {"after": few}}))["drop"] == \
         "not reported: 2 < 3 families"
+    assert not any("fewer than half" in line for line in _heldout_lines(three))  # the start failed 9 of 10 each
+
+
+def test_the_heldout_report_names_entries_the_starting_policy_mostly_passes():
+    """A kept failure is exact at its own seed only: held out at other seeds, the start may pass most of it, and
+    the report says so beside the table instead of leaving the reader to count."""
+    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.mining.loop_report import _heldout_lines
+
+    def records(failed_by_scenario):
+        return [{"scenario": name, "seed": seed, "failed": seed < failed, "error": None}
+                for name, failed in failed_by_scenario.items() for seed in range(10)]
+
+    start = records({"replay_a": 10, "replay_b": 2, "replay_c": 5, "replay_d": 4})
+    tuned = records({"replay_a": 1, "replay_b": 0, "replay_c": 1, "replay_d": 0})
+    families = {"replay_a": "a", "replay_b": "b", "replay_c": "c", "replay_d": "d"}
+    summary = heldout_comparison(start, tuned, None, min_episodes=20, families=families, min_families=3)
+    [line] = [line for line in _heldout_lines(summary) if "fewer than half" in line]
+    assert "of replay_b (2 of 10), replay_d (4 of 10):" in line and "at its own seed only" in line
 
 
 def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_of_a_family_are_not_independent():

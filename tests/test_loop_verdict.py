@@ -356,6 +356,29 @@ def test_a_fine_tuned_policy_that_fails_on_the_untouched_set_is_not_accepted():
     assert recommendation(_report(record)).verdict == "ACCEPTED"
 
 
+def test_an_untouched_set_the_start_failed_entirely_is_called_vacuous_in_the_verdict_and_the_report():
+    from dv2s_gym.mining.loop_record import UntouchedComparison
+    from dv2s_gym.mining.loop_report import _untouched_lines
+
+    def policies(start_failed: int) -> dict:
+        rate = {"value": start_failed / 6, "low": 0.0, "high": 1.0}
+        return {"start": {"episodes": 6, "failure_rate": rate},
+                "fine_tuned": {"episodes": 6, "failure_rate": {"value": 0.5, "low": 0.1, "high": 0.9}}}
+
+    record = _accepted_round()
+    record["steps"]["untouched"] = {"policies": policies(6), "fine_tuned_vs_start": {"verdict": "PASS", "reason": "r"}}
+    verdict = recommendation(_report(record))
+    assert verdict["verdict"] == "ACCEPTED"
+    assert "on the untouched set the starting policy failed every untouched episode (6 of 6)" in verdict["reason"]
+    assert "non-inferiority against it is vacuous" in verdict["reason"]
+    lines = _untouched_lines(UntouchedComparison.from_dict({"scenarios": ["a"], "seeds": 6, "policies": policies(6)}))
+    assert any(line.startswith("- **WARNING: the starting policy failed every untouched episode") for line in lines)
+    record["steps"]["untouched"]["policies"] = policies(5)  # one passed: the comparison can fail, so it says something
+    assert "vacuous" not in recommendation(_report(record))["reason"]
+    lines = _untouched_lines(UntouchedComparison.from_dict({"scenarios": ["a"], "seeds": 6, "policies": policies(5)}))
+    assert not any("WARNING" in line for line in lines)
+
+
 def test_an_inconclusive_cross_round_check_is_named_in_the_reason():
     first, second = _accepted_round(), _accepted_round()
     second.update(round=2, policy=first["new_policy"], new_policy="ppo:round_2/policy/model.zip")

@@ -633,7 +633,9 @@ def test_the_replay_script_narrows_the_continuous_ranges_and_fixes_the_discrete_
     assert intervals == {"gap": [24.6, 25.4], "lanes": [2.0, 2.0], "other": [0.0, 0.2]}  # 2 % of the width each side
     assert "param gap = Range(24.6, 25.4)" in narrowed and "param other = Range(0.0, 0.2)" in narrowed
     assert "param lanes = 2  # fixed at the failing value (the parent draws DiscreteRange(1, 3))" in narrowed
-    assert not_narrowed == {"colour": "its failing value 'red' is not a number"}
+    assert not_narrowed == {"colour": "its failing value 'red' is not a number",  # and what the body draws:
+                            "ego": "outside the params, its position is drawn at random (no specifier fixes it, so "
+                                   "the model's default region places it)"}
     for kept in ("param colour = Uniform('red', 'blue')", "param map = 'highway_straight'", "ego = new Car"):
         assert kept in narrowed
     with pytest.raises(ValueError, match="outside its range"):
@@ -654,13 +656,37 @@ def test_the_replay_script_narrows_an_offset_range_fixes_a_two_valued_choice_and
     assert "param lead_gap = Range(16.8, 17.2)" in narrowed
     assert intervals["brake_strength"] == [1.0, 1.0]
     assert "param brake_strength = 1.0  # fixed at the failing value" in narrowed
-    assert sorted(not_narrowed) == ["drawn", "mix", "noise"]
+    assert sorted(not_narrowed) == ["drawn", "ego", "mix", "noise"]
     assert "not among the failure's recorded parameters" in not_narrowed["drawn"]
     assert "Normal(0, 1)" in not_narrowed["noise"] and "mixes intervals and separate values" in not_narrowed["mix"]
     with pytest.raises(ValueError, match="outside its range"):
         narrowed_script(script, {"lead_gap": 5.0})
     with pytest.raises(ValueError, match="outside its range"):
         narrowed_script(script, {"brake_strength": 0.5})
+
+
+def test_the_replay_lists_every_value_the_script_draws_outside_its_params():
+    """A draw in the script's body is recorded by no mining run, so the replay keeps it as the parent draws it: the
+    entry is the failing scene at its own seed only, and its provenance says which draws make other seeds differ."""
+    from dv2s_gym.mining.exact_replay import narrowed_script
+
+    script = ("param map = 'highway_straight'\nparam gap = Range(20, 40)\nlanes = [1, 2]\n"
+              "lane = Uniform(*lanes)\nfixedLane = Uniform(lanes[0])\negoS = Range(50, 1200)  # Range(1, 2) in a note\n"
+              "behavior Wobble():\n    while True:\n        take SetThrottleAction(Range(0.2, 0.4))\n"
+              "ego = new Car at lane.centerline.pointAlongBy(egoS),\n    with speed Range(20, 27)\n"
+              "lead = new Car ahead of ego by globalParameters.gap\n"
+              "walker = new Pedestrian on lane.centerline\nmarker = new OrientedPoint\n"
+              "new Car following roadDirection from ego for 30, with behavior FollowLaneBehavior(target_speed=Range(9, 11))\n")
+    narrowed, intervals, not_narrowed = narrowed_script(script, {"gap": 25.0})
+    assert intervals == {"gap": [24.6, 25.4]}
+    assert not_narrowed == {
+        "lane": "outside the params, draws Uniform(*lanes)",
+        "egoS": "outside the params, draws Range(50, 1200)",
+        "behavior Wobble": "outside the params, draws Range(0.2, 0.4)",
+        "ego": "outside the params, draws Range(20, 27)",
+        "walker": "outside the params, its position is drawn at random (on lane.centerline)",
+        "<Car 12>": "outside the params, draws Range(9, 11)"}
+    assert "lead" not in not_narrowed and "marker" not in not_narrowed and "fixedLane" not in not_narrowed
 
 
 def test_the_judge_compares_parameter_names_without_case_and_never_prints_an_outside_value_as_inside():
@@ -1647,7 +1673,7 @@ def test_each_bank_scenario_judged_against_itself_compares_every_parameter():
 def test_a_number_beyond_what_floating_point_keeps_makes_the_expression_unread(expression):
     """Scenic computes ``(g + 1e16) - 1e16`` in floating point (6 becomes 6 or 8): the judge does not read it as
     ``g``; the key quantity is then not comparable and the script rejected."""
-    from dv2s_gym.mining.param_meaning import affine_form
+    from dv2s_gym.mining.scenic_values import affine_form
 
     assert affine_form(expression, "g") is None
     compared, rejections = _judged(_CUT_PARENT.replace("param cut_in_gap = Range(5, 11)", "param g = Range(5, 11)")

@@ -166,6 +166,6 @@ def test_the_loop_report_lists_an_exact_replays_parameters_left_at_the_parents_d
     kept = replay_entries(tmp_path)
     assert kept[0]["not_narrowed"] == {"noise": why} and "not_narrowed" not in kept[1]
     lines = _mining_lines({"folder": str(tmp_path), "kept": kept}, {})
-    assert (f"  - exact replay replay_p_stall: parameter noise not narrowed around the failing value: {why}"
-            in lines)
+    assert (f"  - exact replay replay_p_stall is the failing scene at its own seed only; at another seed these keep "
+            f"the parent's draw: noise ({why})" in lines)
     assert not any("replay_q_stall" in line for line in lines)

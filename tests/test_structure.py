@@ -1463,12 +1463,18 @@ def _aliases(function: ast.AST, name: str, same) -> Set[str]:
     return aliases
 
 
-def _literal_length(node: ast.AST, function: ast.AST) -> int:
-    """The length of a literal tuple or list, or of one a name of the function is bound to; else 0."""
+def _bound_value(node: ast.AST, function: ast.AST) -> ast.AST:
+    """What a name is bound to when the function binds it once (``names = ("a", "b")``); else ``node`` itself."""
     if isinstance(node, ast.Name):
         bound = [n.value for n in ast.walk(function) if isinstance(n, ast.Assign)
                  and any(isinstance(t, ast.Name) and t.id == node.id for t in n.targets)]
         node = bound[0] if len(bound) == 1 else node
+    return node
+
+
+def _literal_length(node: ast.AST, function: ast.AST) -> int:
+    """The length of a literal tuple or list, or of one a name of the function is bound to; else 0."""
+    node = _bound_value(node, function)
     return len(node.elts) if isinstance(node, (ast.Tuple, ast.List)) else 0
 
 
@@ -1518,60 +1524,97 @@ def _positional_fields(function: ast.AST, vararg: str) -> int:
     return max(count, nexts)
 
 
-def _keyword_fields(function: ast.AST, kwarg: str) -> Set[str]:
-    """The literal keys a function's body reads from its ``**kwarg`` mapping, or from a name bound to it (``options
-    = kwargs``, ``dict(kwargs)``, ``kwargs.copy()``, ``{**kwargs}``, ``dict(kwargs.items())``) or to one of its
-    readers (``get = kwargs.get``): ``kwargs["x"]``, ``.get("x")``, ``.pop``, ``.setdefault``, ``"x" in kwargs``,
-    ``operator.itemgetter("x", "y")(kwargs)``; and the literal keys a key taken from it is compared with (``for key,
-    value in kwargs.items(): if key == "x"``, ``key in ("x", "y")``, ``match key: case "x"``)."""
-    def holds(node: ast.AST, aliases: Set[str]) -> bool:
-        if isinstance(node, ast.Call) and not node.keywords and len(node.args) == 1 and \
-                getattr(node.func, "id", None) == "dict":
-            node = node.args[0]
-        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "copy":
-            node = node.func.value
-        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "dict" and not node.args and \
-                len(node.keywords) == 1 and node.keywords[0].arg is None:
-            node = node.keywords[0].value
-        elif isinstance(node, ast.Dict) and len(node.keys) == 1 and node.keys[0] is None:
-            node = node.values[0]
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "items":
-            node = node.func.value
-        return isinstance(node, ast.Name) and node.id in aliases
+def _holds_mapping(node: ast.AST, aliases: Set[str]) -> bool:
+    """``node`` holds the same mapping as one of ``aliases``: the name itself, ``dict(kwargs)``, ``kwargs.copy()``,
+    ``dict(**kwargs)``, ``{**kwargs}`` or ``kwargs.items()`` of one of them."""
+    if isinstance(node, ast.Call) and not node.keywords and len(node.args) == 1 and \
+            getattr(node.func, "id", None) == "dict":
+        node = node.args[0]
+    elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "copy":
+        node = node.func.value
+    elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "dict" and not node.args and \
+            len(node.keywords) == 1 and node.keywords[0].arg is None:
+        node = node.keywords[0].value
+    elif isinstance(node, ast.Dict) and len(node.keys) == 1 and node.keys[0] is None:
+        node = node.values[0]
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "items":
+        node = node.func.value
+    return isinstance(node, ast.Name) and node.id in aliases
 
-    def literals(node: ast.AST) -> List[Optional[str]]:
-        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
-            return [k for e in node.elts for k in literals(e)]
-        return [node.value] if isinstance(node, ast.Constant) and isinstance(node.value, str) else []
 
-    aliases = _aliases(function, kwarg, holds)
-    readers = _aliases(function, "\0", lambda node, found: isinstance(node, ast.Attribute) and node.attr in (
-        "get", "pop", "setdefault", "__getitem__") and holds(node.value, aliases) or (
-        isinstance(node, ast.Name) and node.id in found))
-    keys_taken: Set[str] = set()
+def _string_literals(node: ast.AST) -> List[str]:
+    """The string constants of a literal string, or of a literal tuple, list or set of them."""
+    if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        return [k for e in node.elts for k in _string_literals(e)]
+    return [node.value] if isinstance(node, ast.Constant) and isinstance(node.value, str) else []
+
+
+def _literal_loops(function: ast.AST) -> Dict[str, List[str]]:
+    """Loop names -> the literal strings they run over: ``for key in ("a", "b")`` (or over a name bound to such a
+    tuple, see :func:`_bound_value`): ``{"key": ["a", "b"]}``."""
+    loops: Dict[str, List[str]] = {}
+    for node in ast.walk(function):
+        if isinstance(node, (ast.For, ast.comprehension)) and isinstance(node.target, ast.Name):
+            loops.setdefault(node.target.id, []).extend(_string_literals(_bound_value(node.iter, function)))
+    return {name: keys for name, keys in loops.items() if keys}
+
+
+def _keys_taken(function: ast.AST, aliases: Set[str]) -> Set[str]:
+    """The names a loop over the mapping binds its keys to (``for key, value in kwargs.items()``, ``for key in
+    kwargs``)."""
+    taken: Set[str] = set()
     for node in ast.walk(function):
         if isinstance(node, (ast.For, ast.comprehension)):
             iterated = node.iter
             if isinstance(iterated, ast.Call) and isinstance(iterated.func, ast.Attribute) and \
                     iterated.func.attr in ("items", "keys"):
                 iterated = iterated.func.value
-            if holds(iterated, aliases):
+            if _holds_mapping(iterated, aliases):
                 target = node.target.elts[0] if isinstance(node.target, ast.Tuple) and node.target.elts \
                     else node.target
                 if isinstance(target, ast.Name):
-                    keys_taken.add(target.id)
+                    taken.add(target.id)
+    return taken
+
+
+_KEY_READERS = ("get", "pop", "setdefault", "__getitem__")
+"""The methods of a mapping that read one key, named by their first argument."""
+
+
+def _key_reads(function: ast.AST, aliases: Set[str]):
+    """``(node, key expression)`` of every use of one key of the mapping: ``kwargs[key]`` and ``kwargs.get(key)``,
+    ``.pop``, ``.setdefault``."""
+    for node in ast.walk(function):
+        if isinstance(node, ast.Subscript) and _holds_mapping(node.value, aliases):
+            yield node, node.slice
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.args
+              and node.func.attr in _KEY_READERS and _holds_mapping(node.func.value, aliases)):
+            yield node, node.args[0]
+
+
+def _keyword_fields(function: ast.AST, kwarg: str) -> Set[str]:
+    """The literal keys a function's body reads from its ``**kwarg`` mapping, or from a name bound to it (``options
+    = kwargs``, ``dict(kwargs)``, ``kwargs.copy()``, ``{**kwargs}``, ``dict(kwargs.items())``) or to one of its
+    readers (``get = kwargs.get``): ``kwargs["x"]``, ``.get("x")``, ``.pop``, ``.setdefault``, ``"x" in kwargs``,
+    ``operator.itemgetter("x", "y")(kwargs)``, a key run over a literal tuple (``for key in ("x", "y"):
+    kwargs[key]``); and the literal keys a key taken from it is compared with (``for key, value in
+    kwargs.items(): if key == "x"``, ``key in ("x", "y")``, ``match key: case "x"``). Reads that name no key are
+    :func:`_opaque_keyword_reads`."""
+    holds, literals = _holds_mapping, _string_literals
+    aliases = _aliases(function, kwarg, holds)
+    readers = _aliases(function, "\0", lambda node, found: isinstance(node, ast.Attribute) and node.attr in
+                       _KEY_READERS and holds(node.value, aliases) or (isinstance(node, ast.Name) and node.id in found))
+    keys_taken = _keys_taken(function, aliases)
 
     def is_key(node: ast.AST) -> bool:
         return isinstance(node, ast.Name) and node.id in keys_taken
 
+    loops = _literal_loops(function)
     keys: Set[str] = set()
+    for _, key in _key_reads(function, aliases):
+        keys.update(loops.get(key.id, []) if isinstance(key, ast.Name) else literals(key))
     for node in ast.walk(function):
-        if isinstance(node, ast.Subscript) and holds(node.value, aliases):
-            keys.update(literals(node.slice))
-        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and holds(node.func.value, aliases)
-              and node.func.attr in ("get", "pop", "setdefault", "__getitem__") and node.args):
-            keys.update(literals(node.args[0]))
-        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in readers - {"\0"} \
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in readers - {"\0"} \
                 and node.args:
             keys.update(literals(node.args[0]))
         elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Call) and
@@ -1596,6 +1639,35 @@ def _keyword_fields(function: ast.AST, kwarg: str) -> Set[str]:
     return keys
 
 
+_BAGS = ("SimpleNamespace", "Namespace", "namedtuple")
+"""Callables that turn a mapping passed whole (``**kwargs``) into attributes read by name."""
+
+
+def _opaque_keyword_reads(function: ast.AST) -> List[str]:
+    """Where a function's body takes the values of its ``**kwargs`` (or a name bound to it) without naming the keys,
+    so that :func:`_keyword_fields` cannot count them: ``kwargs.values()`` (``a, b, c = kwargs.values()``), an
+    attribute bag made of it (``ns = SimpleNamespace(**kwargs)``; just returning one is passing it on whole), and a
+    key that is no literal, no name run over a literal tuple and no key taken from the mapping itself
+    (``kwargs[name]``). A mapping only passed on whole (``g(**kwargs)``) reads nothing itself and has none."""
+    if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)) or not function.args.kwarg:
+        return []
+    kwarg = function.args.kwarg.arg
+    aliases = _aliases(function, kwarg, _holds_mapping)
+    named = set(_literal_loops(function)) | _keys_taken(function, aliases)
+    returned = {id(node.value) for node in ast.walk(function) if isinstance(node, ast.Return)}
+    found = [f"a key that is no literal at line {node.lineno}" for node, key in _key_reads(function, aliases)
+             if not _string_literals(key) and not (isinstance(key, ast.Name) and key.id in named)
+             and isinstance(getattr(node, "ctx", ast.Load()), ast.Load)]
+    for node in ast.walk(function):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "values" and \
+                _holds_mapping(node.func.value, aliases):
+            found.append(f".values() at line {node.lineno}")
+        elif isinstance(node, ast.Call) and _base_name(node.func) in _BAGS and id(node) not in returned and any(
+                k.arg is None and _holds_mapping(k.value, aliases) for k in node.keywords):
+            found.append(f"{_base_name(node.func)}(**{kwarg}) at line {node.lineno}")
+    return sorted(found, key=lambda why: int(why.rpartition(" ")[2]))
+
+
 def _statement_lines(node: ast.AST) -> int:
     """Lines a function spans, a line holding several statements (joined by ``;``) counting one per statement."""
     starts = [n.lineno for n in ast.walk(node) if isinstance(n, ast.stmt)]
@@ -1616,9 +1688,11 @@ def over_the_limits(files: Optional[Dict[str, Path]] = None) -> Dict[str, str]:
             found[f"{shown}"] = "nested too deeply for Python's parser to read (RecursionError)"
             continue
         for name, node in functions:
-            lines, count = _statement_lines(node), _parameters(node)
-            if lines > MAX_LINES or count > MAX_PARAMETERS:
-                found[f"{shown}:{name}"] = f"{lines} lines, {count} parameters"
+            lines, count, opaque = _statement_lines(node), _parameters(node), _opaque_keyword_reads(node)
+            if lines > MAX_LINES or count > MAX_PARAMETERS or opaque:
+                found[f"{shown}:{name}"] = f"{lines} lines, {count} parameters" + (
+                    f"; reads its **{node.args.kwarg.arg} without naming the keys ({', '.join(opaque)}): read each "
+                    "setting by name, or pass the mapping on whole" if opaque else "")
     return found
 
 
@@ -1689,6 +1763,9 @@ _NINE = ("a", "b", "c", "d", "e", "f", "g", "h", "i")
     "def _planted_reader(**kwargs):\n    get = kwargs.get\n    return " + ", ".join(f"get('{k}')" for k in _NINE) + "\n",
     "def _planted_itemgetter(**kwargs):\n    import operator\n    return operator.itemgetter(%(keys)s)(kwargs)\n",
     "def _planted_subscript(**kwargs):\n    return " + ", ".join(f"kwargs['{k}']" for k in _NINE) + "\n",
+    "def _planted_key_loop(**kwargs):\n    out = []\n    for key in (%(keys)s):\n        out.append(kwargs[key])\n"
+    "    return out\n",
+    "def _planted_key_loop_named(**kwargs):\n    names = (%(keys)s)\n    return [kwargs.get(n) for n in names]\n",
     # positions taken from *args through zip, iter, an index over range() or an alias
     "def _planted_zip(*args):\n    return dict(zip((%(keys)s), args))\n",
     "def _planted_zip_named(*args):\n    names = (%(keys)s)\n    return {n: v for n, v in zip(names, args)}\n",
@@ -1701,6 +1778,34 @@ def test_the_limits_see_parameters_planted_through_kwargs_and_args(tmp_path, pla
     planted = planted % {"keys": ", ".join(repr(k) for k in _NINE),
                          "table": ", ".join(f"{k!r}: {n}" for n, k in enumerate(_NINE))}
     assert _limits_of_a_plant(tmp_path, planted).endswith(" 9 parameters")
+
+
+@pytest.mark.parametrize("planted, why", [
+    ("def _planted_namespace(**kwargs):\n    import types\n    o = types.SimpleNamespace(**kwargs)\n    return "
+     + ", ".join(f"o.{k}" for k in _NINE) + "\n", "SimpleNamespace(**kwargs) at line"),
+    ("def _planted_values(**kwargs):\n    " + ", ".join(_NINE) + " = kwargs.values()\n    return a\n",
+     ".values() at line"),
+    ("def _planted_copied_values(**kwargs):\n    options = dict(kwargs)\n    return list(options.values())\n",
+     ".values() at line"),
+    ("def _planted_key_by_name(name, **kwargs):\n    return kwargs.get(name)\n", "a key that is no literal at line"),
+])
+def test_the_limits_refuse_settings_read_from_kwargs_without_naming_them(tmp_path, planted, why):
+    found = _limits_of_a_plant(tmp_path, planted)
+    assert why in found and "without naming the keys" in found, found
+
+
+def _opaque(source: str) -> List[str]:
+    """The reads :func:`_opaque_keyword_reads` finds in the one function of ``source``."""
+    return _opaque_keyword_reads(ast.parse(textwrap.dedent(source)).body[0])
+
+
+def test_keyword_arguments_passed_on_whole_or_read_by_name_are_not_opaque():
+    assert _opaque("def f(**kw):\n    return g(**kw)\n") == []
+    assert _opaque("def f(**kw):\n    return SimpleNamespace(**kw)\n") == []  # made and returned: passed on whole
+    assert _opaque("def f(**kw):\n    return [kw[k] for k, v in kw.items()]\n") == []  # keys of the mapping
+    assert _opaque("def f(name, **kw):\n    kw[name] = 1\n    return g(**kw)\n") == []  # a key set, not read
+    assert _opaque("def f(**kw):\n    return [kw.get(k) for k in ('a', 'b')]\n") == []
+    assert _count("def f(**kw):\n    return [kw.get(k) for k in ('a', 'b')]\n") == 2
 
 
 def test_keyword_arguments_passed_on_whole_count_once():
@@ -2512,7 +2617,7 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                                       "geometry (no user input)",
     "scenario_bank.maps.build_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
                                                               "tables (no user input)",
-    "dv2s_gym.mining.param_meaning:Quantity.over:AssertionError": "an invariant, not an input check: the image was "
+    "dv2s_gym.mining.scenic_values:Quantity.over:AssertionError": "an invariant, not an input check: the image was "
                                                                   "read when the Quantity was made (type narrowing)",
     "scenario_bank.maps.build_maps:write_maps:AssertionError": "the map builder's self-check that each builder "
                                                                "names its own map (no user input)",

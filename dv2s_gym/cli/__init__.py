@@ -18,7 +18,7 @@ import sys
 from typing import List, Optional
 
 from dv2s_gym.cli import (bank, convert, demo, evaluate, loop, maps, mine, regress, replay, run, train)
-from dv2s_gym.cli.errors import missing_extra, report_error
+from dv2s_gym.cli.errors import UsageError, missing_extra, report_error
 from dv2s_gym.cli.interrupts import SigintFlag, report_interrupted
 from dv2s_gym.cli.parser import Parser
 from scenario_bank.errors import DV2SError
@@ -35,8 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
                                     "scenarios and run them as Gymnasium episodes in highway-env.")
     parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
-    parser.add_argument("--bank", default=None, help="bank folder (default: the bank shipped with dv2s-gym); "
-                        "also accepted after `bank` and after its subcommand")
+    parser.add_argument("--bank", default=None, help="bank folder of the commands that read a bank (default: the bank "
+                        "shipped with dv2s-gym); also accepted after the command (and after `bank`'s subcommand)")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for group in COMMAND_GROUPS:
         group.add_parser(subparsers)
@@ -87,6 +87,7 @@ def _main(argv: Optional[List[str]]) -> int:
     sigint = SigintFlag()
     try:
         with sigint:
+            _refuse_unread_bank(parser, args)
             return int(args.func(args) or 0)
     except KeyboardInterrupt as stop:
         return report_interrupted(args, getattr(stop, "note", None))
@@ -103,6 +104,18 @@ def _main(argv: Optional[List[str]]) -> int:
         # away) and the file. A missing optional dependency names the extra to install. Anything else, a ValueError
         # included, is a fault of dv2s-gym or of a library (bad input is a DV2SError), so the --debug hint is added.
         return report_error(args, error, explained=isinstance(error, OSError) or bool(missing_extra(error)))
+
+
+def _refuse_unread_bank(parser: Parser, args: argparse.Namespace) -> None:
+    """A :class:`UsageError` for ``dv2s --bank DIR COMMAND`` when the command reads no bank (it never declared
+    ``--bank`` with :func:`~dv2s_gym.cli.parser.bank_option`, which sets ``reads_bank``): the folder would be
+    silently ignored, or the command would read the shipped bank instead."""
+    if args.bank is None or getattr(args, "reads_bank", False):
+        return
+    readers = [name for name, command in parser.commands().items() if command.get_default("reads_bank")]
+    raise UsageError(f"--bank {args.bank} names the scenario bank a command reads, and `dv2s {args.command}` reads "
+                     f"none, so it would be ignored: drop --bank (the commands that read a bank and take it: "
+                     f"{', '.join(readers)})")
 
 
 def _silence_stdout() -> None:

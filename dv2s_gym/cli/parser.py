@@ -37,6 +37,11 @@ class Parser(argparse.ArgumentParser):
         for parser in parsers:
             parser._option_owners = owners
 
+    def commands(self) -> dict:
+        """This parser's subcommands, name -> parser."""
+        return {name: child for action in self._actions if isinstance(action, argparse._SubParsersAction)
+                for name, child in action.choices.items()}
+
     def _tree(self):
         yield self
         seen = set()
@@ -89,9 +94,11 @@ class Parser(argparse.ArgumentParser):
 
 
 def bank_option(p: argparse.ArgumentParser) -> None:
-    """``--bank`` on a subcommand (the top-level parser has its own)."""
+    """``--bank`` on a subcommand (the top-level parser has its own), and the declaration that the command reads
+    a bank (``reads_bank``): ``dv2s --bank DIR`` before any other command is refused, never ignored."""
     # SUPPRESS: given at several levels, the one the user wrote wins; not given, the top level's None stays
     p.add_argument("--bank", default=argparse.SUPPRESS, help="bank folder (default: the bank shipped with dv2s-gym)")
+    p.set_defaults(reads_bank=True)
 
 
 def bank_command(bank_sub, name: str, help_text: str, func: Callable[[argparse.Namespace], int]):

@@ -82,11 +82,11 @@ from dv2s_gym.mining.interaction import (FailureInteraction, failure_interaction
 from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.param_meaning import (actor_objects, behaviour_overrides, counterpart_objects, fixed_quantities,
-                                           joint_interval, key_uses, object_behaviour_heads, placement_parts,
-                                           object_behaviours, meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
-                                           lengths_along, placements,
-                                           read_support, script_parameters, support_contains, support_hull,
-                                           script_objects, support_text, tied_objects)
+                                           key_uses, lengths_along, meaning_map, name_mismatch, object_behaviour_heads,
+                                           object_behaviours, placements, quantity_uses, script_objects,
+                                           script_parameters, tied_objects)
+from dv2s_gym.mining.scenic_values import (joint_interval, placement_parts, quantity_of, read_interval, read_support,
+                                           support_contains, support_hull, support_text)
 from dv2s_gym.mining.settings import read_run_settings
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline import stages
@@ -355,14 +355,14 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
 
     A distribution built from ``Range``/``Uniform`` and numbers by sums, differences, products and quotients with
     numbers and unary minus (``Range(2, 4) * 2 + 1``) is read as the interval it produces
-    (:func:`~dv2s_gym.mining.param_meaning.read_interval`). Given the parent, a counterpart that sets the quantity
+    (:func:`~dv2s_gym.mining.scenic_values.read_interval`). Given the parent, a counterpart that sets the quantity
     through an affine expression of itself alone (``CutIn(globalParameters.g + 10)``) is compared through that
     expression: the quantity the failing value set in the parent (through the parent's own expression) against
     the interval the new expression produces over the counterpart's range (``"expression"``, ``"interval"``,
     ``"quantity"`` in its comparison; ``"parent_expression"`` when the parent's is not the bare parameter), on every
     quantity the parameter sets in both scripts (``"where"`` names the one kept when there are several). A
     distribution that is not one interval (``Uniform(5, 9)``, ``DiscreteRange(5, 9)``, ``Uniform(Range(1, 2),
-    100)``) keeps its values in ``"support"`` (:func:`~dv2s_gym.mining.param_meaning.read_support`): the failing
+    100)``) keeps its values in ``"support"`` (:func:`~dv2s_gym.mining.scenic_values.read_support`): the failing
     value must be one of them.
 
     Given the parent, ``"key"`` holds ``{failing parameter: the quantity it sets}`` for the numeric failing parameters
@@ -638,10 +638,10 @@ def _compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tupl
     """Compare jointly each key parameter the judge could not compare although the new script sets its key quantity
     by parameters of its own (``out["key_not_compared"]``) when both scripts set that quantity by expressions of
     parameters, numbers and inline ``Range``s in the same frame (the same slot; a placement along a lane in the same
-    form, :func:`~dv2s_gym.mining.param_meaning.placement_parts`): the parent's expression at the failing values
+    form, :func:`~dv2s_gym.mining.scenic_values.placement_parts`): the parent's expression at the failing values
     (all of them failing parameters, and more than the parameter alone: a quantity the parent sets as a function of
     the parameter alone is compared as a parameter) gives the failing quantity; the new expression's interval
-    (:func:`~dv2s_gym.mining.param_meaning.joint_interval`) holds each of its parameters that stands for a compared
+    (:func:`~dv2s_gym.mining.scenic_values.joint_interval`) holds each of its parameters that stands for a compared
     failing parameter (compared bare, by name or meaning) at that failing value and lets the others range over
     their ranges (each quantity on its own: a parameter of the new script that sets two of them may take one value
     for one and another for the other): ``ego_speed * (first_arrival + ego_gap_time)`` with the failing ego_speed and the two times over
@@ -734,7 +734,7 @@ def _key_set_otherwise(parent: str, script: str, keyed: Mapping[str, Sequence[Tu
 def _script_ranges(script: str) -> Dict[str, Tuple[float, float]]:
     """``{parameter: (low, high)}`` of the script's numeric parameters: :func:`scenario_bank.dedup.param_ranges`'s
     forms, the affine expressions of ``Range``/``Uniform``/numbers
-    :func:`~dv2s_gym.mining.param_meaning.read_interval` reads, and ``Normal(mean, sd)`` read as
+    :func:`~dv2s_gym.mining.scenic_values.read_interval` reads, and ``Normal(mean, sd)`` read as
     ``mean ± NORMAL_SPREAD * sd`` (:data:`NORMAL_SPREAD`)."""
     ranges: Dict[str, Tuple[float, float]] = {}
     for name, text in script_parameters(script).items():
@@ -768,7 +768,7 @@ def _normal_interval(text: str) -> Optional[Tuple[float, float]]:
 
 
 def _script_supports(script: str) -> Dict[str, List[Any]]:
-    """``{parameter: its values part by part}`` (:func:`~dv2s_gym.mining.param_meaning.read_support`) of the
+    """``{parameter: its values part by part}`` (:func:`~dv2s_gym.mining.scenic_values.read_support`) of the
     script's parameters whose distribution is not one interval: ``Uniform(5, 9)`` takes 5 or 9, never 6;
     ``DiscreteRange(5, 9)`` integers only."""
     supports: Dict[str, List[Any]] = {}

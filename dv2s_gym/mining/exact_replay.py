@@ -4,7 +4,8 @@ A mined failure is kept exactly, whatever the D-V2S conversion makes of it: the 
 parent's Scenic script with every continuous mined parameter (``param x = Range(a, b)``, also offset or scaled by
 numbers) narrowed to :data:`NARROW` of its width on either side of the failing value and every discrete one
 (``Uniform(0.3, 1.0)``, ``DiscreteRange(1, 3)``) fixed at it (:func:`narrowed_script`; any other distribution
-keeps the parent's, and the provenance's ``not_narrowed`` lists it with why), and its provenance ``replay`` holds
+keeps the parent's, and the provenance's ``not_narrowed`` lists it with why, as it lists every value the script
+draws outside its params: :mod:`dv2s_gym.mining.scene_draws`), and its provenance ``replay`` holds
 what pins the scene exactly: ``{"params", "seed", "trajectory_hash", "policy", "intervals", "not_narrowed"}`` and
 what the episode depends on beyond the scene
 (:func:`replay_versions`): the policy checkpoint's SHA-256 (``policy_sha256``, ``None`` when the policy is
@@ -12,7 +13,8 @@ no checkpoint), the dv2s-gym version, one SHA-256 of its simulator and policy so
 keeps its version) and the trace format's version. Running the entry with those parameters and that seed
 (:func:`replay_failure`) is the failing episode, step for step: Scenic draws nothing for a fixed parameter,
 so narrowing the ranges around the fixed values changes no other random draw of the scene. Run with other
-seeds and no fixed parameters, the entry samples the neighbourhood of the failure. A replay that no longer
+seeds, the entry samples the neighbourhood of the failure: its params near the failing values, its other draws
+(``not_narrowed``) as the parent makes them. A replay that no longer
 matches says why it may not (:func:`mismatch_reason`): another checkpoint, another dv2s-gym, or, with
 everything the same, a real divergence.
 """
@@ -23,7 +25,8 @@ import os
 import re
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
-from dv2s_gym.mining.param_meaning import read_support, support_contains, support_text
+from dv2s_gym.mining.scenic_values import read_support, support_contains, support_text
+from dv2s_gym.mining.scene_draws import inline_draws
 from dv2s_gym.regress import identity
 from dv2s_gym.regress.identity import checkpoint_path, installed_version
 from envs.trace import TRACE_VERSION
@@ -50,12 +53,13 @@ def narrowed_script(script: str, params: Mapping[str, Any], narrow: float = NARR
     """``script`` with each parameter of ``params`` narrowed around its failing value; returns the script, the new
     intervals ``{name: [lo, hi]}`` and the parameters left as the parent draws them, with why (``{name: reason}``).
 
-    The parameter's distribution is read by :func:`dv2s_gym.mining.param_meaning.read_support`: one interval of
+    The parameter's distribution is read by :func:`dv2s_gym.mining.scenic_values.read_support`: one interval of
     numbers (``Range(a, b)``, or one offset or scaled by numbers, ``Range(0, 10) + 12``) becomes ``Range(lo, hi)``,
     ``narrow`` of its width on either side of the value; a discrete one (``Uniform(0.3, 1.0)``,
     ``DiscreteRange(1, 3)``, numbers offset or scaled) is fixed at the failing value. Any other (a ``Normal``, an
     interval mixed with points, text values, another parameter) is left as it is and listed, and so is a parameter
-    the script draws that ``params`` does not hold (its failing value is unknown). Raises
+    the script draws that ``params`` does not hold (its failing value is unknown), and every value the script draws
+    outside its params (:func:`~dv2s_gym.mining.scene_draws.inline_draws`: no run records those). Raises
     ``ValueError`` for a value the distribution cannot take."""
     intervals: Dict[str, list] = {}
     skipped: Dict[str, str] = {}
@@ -106,6 +110,10 @@ def narrowed_script(script: str, params: Mapping[str, Any], narrow: float = NARR
         else:
             skipped[name] = (f"its distribution {expression.strip()} mixes intervals and separate values "
                              f"({support_text(parts)}), so it keeps the parent's")
+    for label, why in inline_draws(script).items():
+        while label in skipped:
+            label += "'"
+        skipped[label] = why
     return "".join(lines), intervals, skipped
 
 
@@ -123,7 +131,7 @@ def _random(expression: str) -> bool:
 
 
 def support_values(parts) -> list:
-    """The separate values of a discrete :func:`~dv2s_gym.mining.param_meaning.read_support` (no interval)."""
+    """The separate values of a discrete :func:`~dv2s_gym.mining.scenic_values.read_support` (no interval)."""
     values = set()
     for part in parts:
         if part[0] == "points":

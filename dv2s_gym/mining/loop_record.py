@@ -290,6 +290,17 @@ class UntouchedComparison(JsonRecord):
         """The failure rate of policy ``role`` (``start``, ``fine_tuned``, ``control``) on the set, or ``None``."""
         return (((self.policies or {}).get(role) or {}).get("failure_rate") or {}).get("value")
 
+    def vacuous(self) -> Optional[str]:
+        """Why the fine-tuned policy's comparison with the start on this set says nothing, or ``None``: a start
+        that failed every episode (a policy that stands still fails them all) cannot be done worse than, so
+        non-inferiority against it holds whatever the fine-tuned policy does."""
+        if self.failure_rate("start") != 1.0:
+            return None
+        episodes = ((self.policies or {}).get("start") or {}).get("episodes")
+        return (f"the starting policy failed every untouched episode ({episodes} of {episodes}): no policy can do "
+                "worse, so the fine-tuned policy's non-inferiority against it is vacuous; read the control and "
+                "fine-tuned rates and mean speeds instead")
+
 
 @dataclass(frozen=True, eq=False)
 class RegressSummary(JsonRecord):

@@ -46,14 +46,16 @@ from __future__ import annotations
 
 import ast
 import re
+from dv2s_gym.mining.scenic_statements import split_top, top_statements
+from dv2s_gym.mining.scenic_values import (Quantity, affine_node, is_number, mentions, parse_expression, quantity_of,
+                                           read_support)
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
-           "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
-           "quantity_uses", "read_support", "support_contains", "support_hull", "support_text", "key_parameters", "key_uses", "actor_objects", "counterpart_objects",
-           "fixed_quantities", "object_behaviours", "script_objects", "behaviour_overrides", "object_behaviour_heads",
-           "joint_interval", "placement_parts", "DEFAULT_LENGTHS", "object_lengths",
-           "placements", "lengths_along"]
+           "script_parameters", "affine_uses", "Affine", "quantity_uses", "key_parameters", "key_uses",
+           "actor_objects", "counterpart_objects", "fixed_quantities", "object_behaviours", "script_objects",
+           "behaviour_overrides", "object_behaviour_heads", "DEFAULT_LENGTHS", "object_lengths", "placements",
+           "lengths_along"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -71,509 +73,12 @@ Use = Tuple[str, str, str, str, frozenset]
 Affine = Tuple[float, float, str]
 """``(scale, offset, the expression's text)``: a quantity set to ``scale * parameter + offset``."""
 
-_INTERVAL_CALLS = ("Range", "Uniform")
-
-
-def _is_number(node: ast.AST) -> bool:
-    return isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool)
-
-
-def _affine_node(node: ast.AST, param: Optional[str]) -> Optional[Tuple[float, float]]:
-    """``(scale, offset)`` of ``node`` as ``scale * globalParameters.<param> + offset``; ``None`` when it is built
-    from anything but that parameter, numbers, ``+ - * /`` (a product or quotient by a number only) and unary
-    minus or plus."""
-    if _is_number(node) and _plain(node.value):
-        return 0.0, float(node.value)
-    if (param is not None and isinstance(node, ast.Attribute) and node.attr == param
-            and isinstance(node.value, ast.Name) and node.value.id == "globalParameters"):
-        return 1.0, 0.0
-    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        inner = _affine_node(node.operand, param)
-        if inner is None:
-            return None
-        return (-inner[0], -inner[1]) if isinstance(node.op, ast.USub) else inner
-    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
-        left, right = _affine_node(node.left, param), _affine_node(node.right, param)
-        if left is None or right is None:
-            return None
-        if not all(map(_plain, left + right)):
-            return None  # a part beyond LARGEST: rounding may cancel the parameter
-        if isinstance(node.op, ast.Add):
-            return left[0] + right[0], left[1] + right[1]
-        if isinstance(node.op, ast.Sub):
-            return left[0] - right[0], left[1] - right[1]
-        if isinstance(node.op, ast.Mult):
-            if left[0] and right[0]:
-                return None  # the parameter times itself: not affine
-            return (left[0] * right[1] + right[0] * left[1], left[1] * right[1])
-        if right[0] or right[1] == 0.0:
-            return None  # a quotient by the parameter, or by zero
-        return left[0] / right[1], left[1] / right[1]
-    return None
-
-
-LARGEST = 1e6
-"""The largest number (in absolute value) the judge reads in an expression: Scenic computes in floating point, and
-beside a larger one a parameter's value is rounded away (``(g + 1e16) - 1e16`` is not ``g``: 6 becomes 6 or 8);
-an expression holding one, or whose affine form reaches one, is not read (not comparable). A scene's quantities
-(metres, seconds, m/s) stay far below it, where the rounding is below the judge's tolerance of 1e-9."""
-
-
-def _plain(number: float) -> bool:
-    return abs(number) <= LARGEST
-
-
-def _parse(text: str) -> Optional[ast.AST]:
-    try:
-        return ast.parse(text.strip(), mode="eval").body
-    except (SyntaxError, ValueError):
-        return None
-
-
-def affine_form(expression: str, param: str) -> Optional[Tuple[float, float]]:
-    """``(scale, offset)`` when ``expression`` is ``scale * globalParameters.<param> + offset`` built from that
-    parameter, numbers, sums and differences, products and quotients by numbers and unary minus (nested, in
-    brackets), the parameter appearing with a non-zero scale; else ``None``."""
-    node = _parse(expression)
-    form = _affine_node(node, param) if node is not None else None
-    if form is not None and not all(map(_plain, form)):
-        return None  # beyond what floating point keeps exact enough (LARGEST)
-    return form if form is not None and form[0] != 0.0 else None
-
-
-class Quantity:
-    """A quantity an expression sets as a known function of one parameter: ``at(value)`` is the quantity a value of
-    the parameter gives, ``over(low, high)`` the interval it takes with the parameter in ``low..high``; ``key``
-    identifies the function whatever the parameter is called (two scripts' ``g + 10`` and ``gap + 10`` are the same
-    function), ``text`` is the expression."""
-
-    def __init__(self, text: str, key: Tuple[Any, ...], node: ast.AST, param: str):
-        self.text, self.key, self._node, self._param = text, key, node, param
-
-    def at(self, value: float) -> float:
-        return self.over(value, value)[0]
-
-    def over(self, low: float, high: float) -> Tuple[float, float]:
-        if self.key[0] == "affine":
-            scale, offset = self.key[1], self.key[2]
-            ends = sorted((scale * low + offset, scale * high + offset))
-            return ends[0], ends[1]
-        image = _image(self._node, self._param, low, high)
-        assert image is not None  # read at construction
-        return image
-
-    def __repr__(self) -> str:
-        return f"Quantity({self.text!r})"
-
-
-def _is_param(node: ast.AST, param: str) -> bool:
-    return (isinstance(node, ast.Attribute) and node.attr == param and isinstance(node.value, ast.Name)
-            and node.value.id == "globalParameters")
-
-
-def _image(node: ast.AST, param: str, low: float, high: float) -> Optional[Tuple[float, float]]:
-    """The interval ``node`` takes with the parameter in ``low..high``, by interval arithmetic (exact when the
-    parameter occurs once): numbers, the parameter, ``+ -``, ``* /`` by a non-zero number, unary minus or plus and
-    ``abs``; ``None`` for anything else."""
-    if _is_number(node) and _plain(node.value):
-        return float(node.value), float(node.value)
-    if _is_param(node, param):
-        return low, high
-    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        inner = _image(node.operand, param, low, high)
-        if inner is None:
-            return None
-        return (-inner[1], -inner[0]) if isinstance(node.op, ast.USub) else inner
-    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "abs"
-            and len(node.args) == 1 and not node.keywords):
-        inner = _image(node.args[0], param, low, high)
-        if inner is None:
-            return None
-        if inner[0] >= 0:
-            return inner
-        if inner[1] <= 0:
-            return -inner[1], -inner[0]
-        return 0.0, max(-inner[0], inner[1])
-    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
-        left, right = _image(node.left, param, low, high), _image(node.right, param, low, high)
-        if left is None or right is None:
-            return None
-        if isinstance(node.op, ast.Add):
-            return left[0] + right[0], left[1] + right[1]
-        if isinstance(node.op, ast.Sub):
-            return left[0] - right[1], left[1] - right[0]
-        number = right if isinstance(node.op, ast.Div) or left[0] != left[1] else left
-        if number[0] != number[1] or number[0] == 0.0 or not all(map(_finite, number)):
-            return None  # a product of two sampled values, by zero, or a quotient by a sampled value or zero
-        if isinstance(node.op, ast.Mult):
-            ends = [a * b for a in left for b in right]
-        else:
-            ends = [a / right[0] for a in left]
-        return min(ends), max(ends)
-    return None
-
-
-def _finite(number: float) -> bool:
-    return number == number and abs(number) != float("inf")
-
-
-def _mentions(node: ast.AST, param: str) -> int:
-    return sum(1 for child in ast.walk(node) if _is_param(child, param))
-
-
-class _Renamed(ast.NodeTransformer):
-    def __init__(self, param: str):
-        self.param = param
-
-    def visit_Attribute(self, node: ast.Attribute) -> ast.AST:
-        return ast.Name(id="_parameter_", ctx=ast.Load()) if _is_param(node, self.param) else node
-
-
-def quantity_of(expression: str, param: str) -> Optional[Quantity]:
-    """The quantity ``expression`` sets as a known function of ``globalParameters.<param>`` alone: an affine one
-    (:func:`affine_form`), or one the parameter occurs in once built from numbers, ``+ - * /`` by numbers, unary
-    minus and ``abs`` (its interval read exactly); ``None`` for anything else (another sampled value, a call, ``%``,
-    a conditional, a reference point)."""
-    node = _parse(expression)
-    if node is None:
-        return None
-    text = " ".join(expression.split())
-    form = affine_form(expression, param)
-    if form is not None:
-        return Quantity(text, ("affine", form[0], form[1]), node, param)
-    if _mentions(node, param) != 1 or not any(isinstance(n, ast.Call) for n in ast.walk(node)):
-        return None
-    probe = [_image(node, param, low, high) for low, high in ((-1.0, 1.0), (2.0, 3.0))]
-    if any(p is None or not all(map(_finite, p)) or p[0] == p[1] for p in probe):
-        return None  # unreadable, or a constant however the parameter varies
-    return Quantity(text, ("exact", ast.dump(_Renamed(param).visit(_parse(expression)))), node, param)
-
-
-def _signed(op: ast.unaryop, inner: Tuple[float, float]) -> Tuple[float, float]:
-    """The interval of ``-x`` or ``+x`` for ``x`` in ``inner``."""
-    return (-inner[1], -inner[0]) if isinstance(op, ast.USub) else inner
-
-
-def _sum_difference_product(op: ast.operator, left: Tuple[float, float],
-                            right: Tuple[float, float]) -> Tuple[float, float]:
-    """The interval of ``a + b``, ``a - b`` or ``a * b`` (``op`` one of those) for ``a`` in ``left``, ``b`` in
-    ``right``."""
-    if isinstance(op, ast.Add):
-        return left[0] + right[0], left[1] + right[1]
-    if isinstance(op, ast.Sub):
-        return left[0] - right[1], left[1] - right[0]
-    ends = [a * b for a in left for b in right]
-    return min(ends), max(ends)
-
-
-def _interval_node(node: ast.AST) -> Optional[Tuple[float, float]]:
-    if _is_number(node) and _plain(node.value):
-        return float(node.value), float(node.value)
-    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _INTERVAL_CALLS \
-            and node.args and not node.keywords:
-        bounds = [_interval_node(arg) for arg in node.args]
-        if any(b is None or b[0] != b[1] for b in bounds) or (node.func.id == "Range" and len(bounds) != 2):
-            return None  # bounds must be numbers
-        return min(b[0] for b in bounds), max(b[1] for b in bounds)
-    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        inner = _interval_node(node.operand)
-        return None if inner is None else _signed(node.op, inner)
-    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
-        left, right = _interval_node(node.left), _interval_node(node.right)
-        if left is None or right is None:
-            return None
-        if left[0] != left[1] and right[0] != right[1]:
-            return None  # two sampled values: only constants may offset or scale a sampled one
-        if not isinstance(node.op, ast.Div):
-            return _sum_difference_product(node.op, left, right)
-        if right[0] != right[1] or right[0] == 0.0:
-            return None  # a quotient by a sampled value, or by zero
-        ends = [a / right[0] for a in left]
-        return min(ends), max(ends)
-    return None
-
-
-def read_interval(expression: str) -> Optional[Tuple[float, float]]:
-    """``(low, high)`` a parameter's distribution ranges over when it is built from ``Range(a, b)``,
-    ``Uniform(...)`` of numbers and numbers by sums and differences with numbers, products and quotients by numbers
-    and unary minus (nested): ``Range(2, 4) * 2 + 1`` is ``(5, 9)``; ``None`` for anything else (a ``Normal``, two
-    sampled values combined)."""
-    node = _parse(expression.split("#", 1)[0])
-    return _interval_node(node) if node is not None else None
-
-
-def joint_interval(expression: str, values: Mapping[str, Tuple[float, float]]) -> Optional[Tuple[float, float]]:
-    """``(low, high)``: the values ``expression`` takes when each ``globalParameters.<name>`` in it ranges over
-    ``values[name]`` (a point when both ends are equal) and each inline ``Range(a, b)`` of numbers over its interval,
-    built by sums, differences, products, quotients (by an interval without 0) and unary minus. Each sampled value
-    (a parameter of non-zero width, an inline ``Range``) may appear once only: interval arithmetic is then the exact
-    range of the expression over the box (with a value used twice, ``g - g``, it would be wider than the truth).
-    ``None`` for anything else: another name, a call, a parameter missing from ``values``."""
-    node = _parse(expression.split("#", 1)[0])
-    if node is None:
-        return None
-    seen: Set[str] = set()
-
-    def walk(part: ast.AST) -> Optional[Tuple[float, float]]:
-        if _is_number(part):
-            return (float(part.value), float(part.value)) if _plain(part.value) else None
-        if isinstance(part, ast.Attribute) and isinstance(part.value, ast.Name) and part.value.id == "globalParameters":
-            if part.attr not in values:
-                return None
-            low, high = values[part.attr]
-            if low != high:
-                if part.attr in seen:
-                    return None
-                seen.add(part.attr)
-            return float(low), float(high)
-        if isinstance(part, ast.Call) and isinstance(part.func, ast.Name) and part.func.id == "Range":
-            return _interval_node(part)
-        if isinstance(part, ast.UnaryOp) and isinstance(part.op, (ast.USub, ast.UAdd)):
-            inner = walk(part.operand)
-            return None if inner is None else _signed(part.op, inner)
-        if isinstance(part, ast.BinOp) and isinstance(part.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
-            left, right = walk(part.left), walk(part.right)
-            if left is None or right is None:
-                return None
-            if not isinstance(part.op, ast.Div):
-                return _sum_difference_product(part.op, left, right)
-            if right[0] <= 0.0 <= right[1]:
-                return None
-            return _sum_difference_product(ast.Mult(), left, (1.0 / right[1], 1.0 / right[0]))
-        return None
-
-    found = walk(node)
-    return found if found is not None and all(_finite(v) for v in found) else None
-
-
-def placement_parts(text: str) -> Tuple[str, str]:
-    """``(frame, value)`` of a use's text: for a placement along a lane (``at X.pointAlongBy(value)``) the frame is
-    the text with the argument taken out and every name replaced by ``N`` (two placements along a lane from its start
-    have the same frame whatever their objects are called), else the frame is ``""`` and the value the text whole."""
-    match = re.search(r"pointAlongBy\s*\(", text)
-    if match is None:
-        return "", text
-    depth, start = 1, match.end()
-    for index in range(start, len(text)):
-        depth += {"(": 1, ")": -1}.get(text[index], 0)
-        if depth == 0:
-            break
-    else:
-        return "", text
-    frame = text[:start] + "#" + text[index:]
-    return re.sub(r"\b[A-Za-z_]\w*\b", "N", re.sub(r"\s+", "", frame)), text[start:index]
-
-
-_DISCRETE_RANGES = ("DiscreteRange", "VerifaiDiscreteRange")
-_CHOICES = ("Uniform", "Options", "Discrete", "VerifaiOptions")
-_GRID_LIMIT = 100000
-
-Part = Tuple[Any, ...]
-"""A part of the values a distribution takes: ``("interval", low, high)``, ``("points", [v, ...])`` or
-``("grid", start, step, count)`` (``start + k * step`` for ``k`` in ``0..count-1``: integers, offset or scaled)."""
-
-
-def _support_node(node: ast.AST) -> Optional[List[Part]]:
-    if _is_number(node) and _plain(node.value):
-        return [("points", [float(node.value)])]
-    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args and not node.keywords:
-        call = node.func.id
-        if call in ("Range", "VerifaiRange") + _DISCRETE_RANGES:
-            bounds = [_interval_node(arg) for arg in node.args]
-            if len(bounds) != 2 or any(b is None or b[0] != b[1] for b in bounds):
-                return None
-            low, high = sorted((bounds[0][0], bounds[1][0]))
-            if call in _DISCRETE_RANGES:
-                if not (float(low).is_integer() and float(high).is_integer()):
-                    return None
-                return [("grid", low, 1.0, int(high - low) + 1)]
-            return [("interval", low, high)]
-        if call in _CHOICES:
-            args = list(node.args)
-            if len(args) == 1 and isinstance(args[0], (ast.List, ast.Tuple)):
-                args = list(args[0].elts)
-            elif len(args) == 1 and isinstance(args[0], ast.Dict):
-                args = [key for key in args[0].keys if key is not None]
-            parts: List[Part] = []
-            points: List[float] = []
-            for arg in args:
-                inner = _support_node(arg)
-                if inner is None:
-                    return None
-                parts += [part for part in inner if part[0] != "points"]
-                points += [v for part in inner if part[0] == "points" for v in part[1]]
-            return ([("points", sorted(set(points)))] if points else []) + parts or None
-        return None
-    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        inner = _support_node(node.operand)
-        return None if inner is None else [_scaled(p, -1.0 if isinstance(node.op, ast.USub) else 1.0, 0.0)
-                                           for p in inner]
-    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
-        left, right = _support_node(node.left), _support_node(node.right)
-        if left is None or right is None:
-            return None
-        number = lambda parts: (parts[0][1][0] if len(parts) == 1 and parts[0][0] == "points"  # noqa: E731
-                                and len(parts[0][1]) == 1 else None)
-        a, b = number(left), number(right)
-        if isinstance(node.op, ast.Add):
-            return [_scaled(p, 1.0, b) for p in left] if b is not None else (
-                [_scaled(p, 1.0, a) for p in right] if a is not None else None)
-        if isinstance(node.op, ast.Sub):
-            return [_scaled(p, 1.0, -b) for p in left] if b is not None else (
-                [_scaled(p, -1.0, a) for p in right] if a is not None else None)
-        if isinstance(node.op, ast.Mult):
-            if b is not None and b != 0.0:
-                return [_scaled(p, b, 0.0) for p in left]
-            return [_scaled(p, a, 0.0) for p in right] if a is not None and a != 0.0 else None
-        return [_scaled(p, 1.0 / b, 0.0) for p in left] if b is not None and b != 0.0 else None
-    return None
-
-
-def _scaled(part: Part, scale: float, offset: float) -> Part:
-    if part[0] == "interval":
-        ends = sorted((scale * part[1] + offset, scale * part[2] + offset))
-        return ("interval", ends[0], ends[1])
-    if part[0] == "points":
-        return ("points", [scale * v + offset for v in part[1]])
-    return ("grid", scale * part[1] + offset, scale * part[2], part[3])
-
-
-def read_support(expression: str) -> Optional[List[Part]]:
-    """The values a parameter's distribution takes, part by part (:data:`Part`), when it is built from numbers,
-    ``Range``, ``DiscreteRange`` (integers), ``Uniform``/``Options``/``Discrete`` of those (their union), offset
-    or scaled by numbers: ``Uniform(5, 9)`` is the points 5 and 9, ``Uniform(Range(1, 2), 100)`` the interval 1..2
-    and the point 100; ``None`` for anything else."""
-    node = _parse(expression.split("#", 1)[0])
-    return _support_node(node) if node is not None else None
-
-
-def _ends(part: Part) -> Tuple[float, float]:
-    """The smallest and largest value of one :data:`Part`."""
-    if part[0] == "interval":
-        return part[1], part[2]
-    if part[0] == "points":
-        return min(part[1]), max(part[1])
-    return tuple(sorted((part[1], part[1] + part[2] * (part[3] - 1))))
-
-
-def support_hull(parts: Sequence[Part]) -> Tuple[float, float]:
-    """The smallest interval holding every value of :func:`read_support`'s ``parts``."""
-    ends = [end for part in parts for end in _ends(part)]
-    return min(ends), max(ends)
-
-
-def support_contains(parts: Sequence[Part], quantity: float, function: Optional["Quantity"] = None,
-                     tolerance: float = 0.0) -> bool:
-    """Whether ``quantity`` is a value the distribution ``parts`` takes, or, given ``function``, one that
-    ``function`` of such a value takes (a grid of more than 100000 values is read as its interval); given
-    ``tolerance``, whether it lies within ``tolerance`` of such a value."""
-    close = lambda v: abs(v - quantity) <= tolerance + 1e-9 * max(1.0, abs(quantity))  # noqa: E731
-    at = (lambda v: v) if function is None else function.at
-    for part in parts:
-        if part[0] == "interval":
-            low, high = (part[1], part[2]) if function is None else function.over(part[1], part[2])
-            if low - 1e-9 - tolerance <= quantity <= high + 1e-9 + tolerance:
-                return True
-        elif part[0] == "points":
-            if any(close(at(v)) for v in part[1]):
-                return True
-        elif part[3] > _GRID_LIMIT:
-            ends = _ends(part)
-            low, high = ends if function is None else function.over(*ends)
-            if low - 1e-9 - tolerance <= quantity <= high + 1e-9 + tolerance:
-                return True
-        elif any(close(at(part[1] + k * part[2])) for k in range(part[3])):
-            return True
-    return False
-
-
-def support_text(parts: Sequence[Part]) -> str:
-    """``"5, 9"``, ``"1..2 or 100"``, ``"the integers 5..9"``: the values of :func:`read_support`'s parts."""
-    def number(v: float) -> str:
-        short = f"{v:g}"
-        return short if float(short) == v else repr(v)
-
-    words = []
-    for part in parts:
-        if part[0] == "interval":
-            words.append(f"{number(part[1])}..{number(part[2])}")
-        elif part[0] == "points":
-            words.append(", ".join(number(v) for v in part[1]))
-        elif part[2] == 1.0:
-            words.append(f"the integers {number(part[1])}..{number(part[1] + part[3] - 1)}")
-        else:
-            words.append(f"{number(part[1])} to {number(part[1] + part[2] * (part[3] - 1))} in steps of "
-                         f"{number(part[2])}")
-    return " or ".join(words)
 
 
 def _norm(name: str) -> str:
     return name.replace("_", "").casefold()
 
 
-_ONCE_OR_MORE = re.compile(r"^for\s+\w+\s+in\s+range\s*\(\s*([1-9]\d*)\s*\)\s*:\s*$")
-"""A top-level loop over ``range(n)``, ``n`` >= 1: its body runs, so its statements are read as top-level ones."""
-
-
-def _statements(script: str) -> List[str]:
-    """The script's top-level statements: a line at column 0 and the indented or bracketed lines that follow it,
-    comments removed. The body of a top-level ``for _ in range(n)`` with ``n`` >= 1 (it runs) is read as top-level
-    statements (:data:`_ONCE_OR_MORE`); a loop that may not run, or over anything else, is not."""
-    statements: List[str] = []
-    depth = 0
-    in_doc = False
-    loop_indent: Optional[int] = None  # the body's indentation of a top-level loop read as top-level statements
-    for raw in script.splitlines():
-        if raw.count('"""') % 2 == 1 or raw.count("'''") % 2 == 1:
-            in_doc = not in_doc
-            continue
-        if in_doc:
-            continue
-        line = re.sub(r"#.*$", "", raw).rstrip()
-        if not line.strip():
-            continue
-        if depth == 0 and _ONCE_OR_MORE.match(line):
-            loop_indent = -1  # its body follows
-            continue
-        if loop_indent is not None and depth == 0:
-            indent = len(line) - len(line.lstrip())
-            if indent == 0:
-                loop_indent = None
-            else:
-                if loop_indent < 0:
-                    loop_indent = indent
-                line = line[loop_indent:] if indent >= loop_indent else line.lstrip()
-        elif loop_indent is not None and loop_indent > 0:
-            line = line[loop_indent:] if line[:loop_indent].isspace() else line
-        if depth == 0 and not line[0].isspace() and not (loop_indent is not None and statements
-                                                            and statements[-1].endswith(",")):
-            statements.append(line)  # (in a loop's body, a line after a trailing comma continues the statement)
-        elif statements:
-            statements[-1] += " " + line.strip()
-        depth = max(0, depth + line.count("(") + line.count("[") - line.count(")") - line.count("]"))
-    return statements
-
-
-def _split_top(text: str, sep: str = ",") -> List[str]:
-    """``text`` split at ``sep`` outside brackets and strings."""
-    parts, depth, quote, current = [], 0, None, []
-    for char in text:
-        if quote:
-            quote = None if char == quote else quote
-        elif char in "'\"":
-            quote = char
-        elif char in "([{":
-            depth += 1
-        elif char in ")]}":
-            depth -= 1
-        elif char == sep and depth == 0:
-            parts.append("".join(current).strip())
-            current = []
-            continue
-        current.append(char)
-    if "".join(current).strip():
-        parts.append("".join(current).strip())
-    return parts
 
 
 def _how(expression: str, name: str) -> str:
@@ -629,7 +134,7 @@ def _behaviors(script: str) -> Dict[str, List[str]]:
     """``{behaviour name: its argument names}`` of the script's ``behavior`` definitions."""
     found = {}
     for name, formals in _BEHAVIOR.findall(script):
-        found[name] = [f.split("=")[0].strip() for f in _split_top(formals) if f.strip()]
+        found[name] = [f.split("=")[0].strip() for f in split_top(formals) if f.strip()]
     return found
 
 
@@ -643,7 +148,7 @@ def _slots(specifier: str, behaviors: Mapping[str, List[str]],
     if match:
         formals = behaviors.get(match.group(1), [])
         out = []
-        for index, argument in enumerate(_split_top(match.group(2))):
+        for index, argument in enumerate(split_top(match.group(2))):
             keyword = re.match(r"^(\w+)\s*=(?!=)\s*(.*)$", argument, re.S)
             if keyword:
                 out.append((f"behavior:{_norm(keyword.group(1))}", keyword.group(2)))
@@ -735,7 +240,7 @@ def _offset_form(text: str) -> Optional[Tuple[str, str, str]]:
     else:
         return None
     source = vector.strip()
-    node = _parse(source)
+    node = parse_expression(source)
     if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "Vector"
             and len(node.args) == 2 and not node.keywords):
         left, right = node.args  # Vector(X, Y) is X @ Y
@@ -752,7 +257,7 @@ def _offset_form(text: str) -> Optional[Tuple[str, str, str]]:
 def _ego_point(script: str) -> Optional[str]:
     """The name the ego is placed at along a lane (``ego = new Car at lane.centerline.pointAlongBy(egoS)``: ``egoS``),
     or ``None``."""
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = re.match(r"ego\s*=\s*new\s+\w+\s+at\s+.*?pointAlongBy\s*\(\s*(\w+)\s*\)", statement, re.S)
         if found:
             return found.group(1)
@@ -789,8 +294,8 @@ def _own_length(kind: str, specifiers: Sequence[str]) -> Optional[float]:
     for specifier in specifiers:
         found = re.match(r"^with\s+length\s+(.+)$", specifier.strip(), re.S)
         if found is not None:
-            node = _parse(found.group(1).strip())
-            return float(node.value) if _is_number(node) and isinstance(node, ast.Constant) else None
+            node = parse_expression(found.group(1).strip())
+            return float(node.value) if is_number(node) and isinstance(node, ast.Constant) else None
     return DEFAULT_LENGTHS.get(kind)
 
 
@@ -798,10 +303,10 @@ def object_lengths(script: str) -> Dict[str, Optional[float]]:
     """``{object: its length}`` of the objects ``script`` makes at its top level (placing points included, at 0):
     :func:`_own_length`, ``None`` when the judge does not know it."""
     lengths: Dict[str, Optional[float]] = {}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is not None and not statement.startswith(_SKIP):
-            lengths[found.group(1) or f"<{found.group(2)}>"] = _own_length(found.group(2), _split_top(found.group(3)))
+            lengths[found.group(1) or f"<{found.group(2)}>"] = _own_length(found.group(2), split_top(found.group(3)))
     return lengths
 
 
@@ -822,7 +327,7 @@ def _between_faces(value: str, expression: str, own: Optional[float],
 def _oriented_names(script: str) -> Set[str]:
     """The names of the objects ``script`` makes that are oriented points (any but a ``Point``), and the ego."""
     names = {"ego"}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is not None and found.group(1) and found.group(2) != "Point" and not statement.startswith(_SKIP):
             names.add(found.group(1))
@@ -845,7 +350,7 @@ def _along(expression: str, reference: Optional[str] = None) -> str:
             break
     else:
         return ""
-    node = _parse(expression[start:index])
+    node = parse_expression(expression[start:index])
     if node is None:
         return ""
     terms: List[Tuple[int, ast.AST]] = []
@@ -929,7 +434,7 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
     oriented = _oriented_names(script)
     lengths = object_lengths(script)
     centred: Set[str] = set()  # placing points offset from an object (see _object_items)
-    for statement in _statements(script):
+    for statement in top_statements(script):
         if statement.startswith(_SKIP):
             continue
         statement = _followed(statement, numbers)
@@ -953,9 +458,9 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
             continue
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
         context = (behaviors, oriented, ego_point, lengths, centred)
-        items = _object_items(kind, _split_top(rest), context, carried_by)
+        items = _object_items(kind, split_top(rest), context, carried_by)
         if kind in PLACEMENT_KINDS and any(_offset_pair(_slots(spec, behaviors, oriented))
-                                           for spec in _split_top(rest)):
+                                           for spec in split_top(rest)):
             centred.add(name)  # its distance ahead, read between faces, leaves out the half length of what it places
         if kind in PLACEMENT_KINDS:
             carried[name] = [(p, s, how, quantity, text) for p, s, how, _, quantity, text in items]
@@ -1020,11 +525,11 @@ def placements(script: str) -> Dict[str, List[str]]:
     """``{object: its placement specifiers}``: the specifiers of each top-level ``new`` statement that are not ``with``
     ones (``ahead of ego by 10``, ``at ego.position + Vector(0, 40)``, ``facing 30 deg``), each on one line."""
     out: Dict[str, List[str]] = {}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is not None and not statement.startswith(_SKIP):
             out[found.group(1) or f"<{found.group(2)}>"] = [
-                " ".join(spec.split()) for spec in _split_top(found.group(3))
+                " ".join(spec.split()) for spec in split_top(found.group(3))
                 if spec.strip() and not re.match(r"^with\b", spec.strip())]
     return out
 
@@ -1050,8 +555,8 @@ def _zero_use(value: str, param: str) -> bool:
     h``): whatever its value, the quantity is the same, so it is no use of the parameter. Read by the affine form with
     the other parameters held as unknowns (each other parameter is replaced by a number, twice: the parameter's
     coefficient must be 0 both times)."""
-    node = _parse(value)
-    if node is None or not _mentions(node, param):
+    node = parse_expression(value)
+    if node is None or not mentions(node, param):
         return False
     for probe in (1.0, 2.0):
         class _Others(ast.NodeTransformer):
@@ -1059,7 +564,7 @@ def _zero_use(value: str, param: str) -> bool:
                 if (isinstance(n.value, ast.Name) and n.value.id == "globalParameters" and n.attr != param):
                     return ast.Constant(value=probe)
                 return n
-        form = _affine_node(_Others().visit(_parse(value)), param)
+        form = affine_node(_Others().visit(parse_expression(value)), param)
         if form is None or form[0] != 0.0:
             return False
     return True
@@ -1088,13 +593,13 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
         for p in dict.fromkeys(_PARAM.findall(text)):
             if not _zero_use(text, p):
                 return None
-            form = _affine_node(_parse(text), p)
+            form = affine_node(parse_expression(text), p)
             if form is None:
                 return None
             text = f"{form[1]:g}"
         return text if text and read_support(text) is not None else None
 
-    for statement in _statements(script):
+    for statement in top_statements(script):
         if statement.startswith(_SKIP):
             continue
         found = _OBJECT.match(statement)
@@ -1108,9 +613,9 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
                     constants.pop(assign.group(1), None)
             continue
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
-        own = _own_length(kind, _split_top(rest))
+        own = _own_length(kind, split_top(rest))
         here: List[Tuple[str, str]] = []
-        for specifier in _split_top(rest):
+        for specifier in split_top(rest):
             slots = _slots(specifier, behaviors, oriented)
             offset = _offset_pair(slots)
             for index, (slot, expression) in enumerate(slots):
@@ -1128,7 +633,7 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
                     here.append((slot, read))
         if kind in PLACEMENT_KINDS:
             carried[name] = [item for item in here if item[1] is not None]
-            if any(_offset_pair(_slots(spec, behaviors, oriented)) for spec in _split_top(rest)):
+            if any(_offset_pair(_slots(spec, behaviors, oriented)) for spec in split_top(rest)):
                 centred.add(name)
             continue
         for slot, text in here:
@@ -1166,7 +671,7 @@ def object_behaviours(script: str) -> Dict[str, str]:
                 body.append(following.strip())
         bodies[head.group(1)] = "\n".join(body)
     out: Dict[str, str] = {}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is None or statement.startswith(_SKIP):
             continue
@@ -1184,7 +689,7 @@ def object_behaviour_heads(script: str) -> Dict[str, Tuple[str, Tuple[str, ...]]
     (the argument names empty for a behaviour the script does not define)."""
     behaviors = _behaviors(script)
     out: Dict[str, Tuple[str, Tuple[str, ...]]] = {}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is None or statement.startswith(_SKIP):
             continue
@@ -1206,7 +711,7 @@ def behaviour_overrides(script: str) -> Dict[Tuple[str, str, str], str]:
         head = _BEHAVIOR.match(line)
         if head is None:
             continue
-        formals = {f.split("=")[0].strip() for f in _split_top(head.group(2)) if f.strip()}
+        formals = {f.split("=")[0].strip() for f in split_top(head.group(2)) if f.strip()}
         found: Dict[str, str] = {}
         for following in lines[index + 1:]:
             if following.strip() and not following[0].isspace():
@@ -1227,7 +732,7 @@ def behaviour_overrides(script: str) -> Dict[Tuple[str, str, str], str]:
 def script_objects(script: str) -> List[Tuple[str, str]]:
     """``[(object, kind)]`` of the actors ``script`` makes at its top level (placing points left out), in order."""
     objects = []
-    for statement in _statements(script):
+    for statement in top_statements(script):
         if statement.startswith(_SKIP):
             continue
         found = _OBJECT.match(statement)
@@ -1241,7 +746,7 @@ def _is_computation(expression: str) -> bool:
     and, besides ``globalParameters.<name>``, holds only numbers, operators and calls of plain functions (``min``,
     ``Range``...), so where the variable is used it stands for that expression (``x = globalParameters.g + 20``, then
     ``with speed x``, sets the speed to ``g + 20``)."""
-    node = _parse(expression.split("#", 1)[0])
+    node = parse_expression(expression.split("#", 1)[0])
     if node is None or not _PARAM.search(expression):
         return False
     calls = {id(n.func) for n in ast.walk(node) if isinstance(n, ast.Call)}
@@ -1423,7 +928,7 @@ def actor_objects(script: str) -> Dict[str, str]:
     named "walker": ``walker1``, ``walker2``). Objects made in a loop or a condition are not known here."""
     objects: List[Tuple[str, str]] = []  # (object, label)
     named: List[Optional[str]] = []
-    for statement in _statements(script):
+    for statement in top_statements(script):
         if statement.startswith(_SKIP):
             continue
         found = _OBJECT.match(statement)

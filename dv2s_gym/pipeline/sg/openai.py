@@ -26,7 +26,6 @@ cosine similarity in numpy. The choice is automatic, logged and recorded in
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import os
@@ -34,7 +33,6 @@ import re
 import threading
 from collections import Counter
 from dataclasses import asdict, dataclass, field, replace
-from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -104,33 +102,15 @@ def _docstring(script: str) -> str:
 def bank_examples(bank: Any = None) -> List[Example]:
     """The bank's scenarios as examples (the shipped bank by default).
 
-    Reads a :class:`scenario_bank.bank.Bank` (entries with ``description``,
-    ``script``, ``elements``); a bank folder in the flat layout
-    (``<name>.scenic`` beside an optional ``<name>.json``) is read directly,
-    the description coming from the sidecar or the script's docstring. Scripts
-    failing the safety check are left out: they are never shown to the model.
+    Reads a :class:`scenario_bank.bank.Bank` or a bank folder (entries with ``description``, ``script``,
+    ``elements``; a folder that is not a bank is the bank's :class:`~scenario_bank.errors.NotABankError`), the
+    description coming from the sidecar or else the script's docstring. Scripts failing the safety check are left
+    out: they are never shown to the model.
     """
     if bank is None or isinstance(bank, (str, os.PathLike)):
         bank = Bank(bank)
-    found: List[Example] = []
-    entries = list(bank)
-    if entries:
-        for entry in entries:
-            found.append(Example(entry.name, entry.description or _docstring(entry.script), entry.script,
-                                 dict(entry.elements or {})))
-    else:
-        root = Path(getattr(bank, "root", bank))
-        for path in sorted(root.glob("*.scenic")):  # a loose folder of scripts with <name>.json sidecars
-            script = path.read_text(encoding="utf-8")
-            meta: Dict[str, Any] = {}
-            sidecar = path.with_suffix(".json")
-            if sidecar.is_file():
-                try:
-                    meta = json.loads(sidecar.read_text(encoding="utf-8"))
-                except ValueError:
-                    meta = {}
-            description = meta.get("description") or _docstring(script)
-            found.append(Example(path.stem, description, script, dict(meta.get("elements") or {})))
+    found = [Example(entry.name, entry.description or _docstring(entry.script), entry.script,
+                     dict(entry.elements or {})) for entry in bank]
     safe = []
     for example in found:
         if not example.description:

@@ -7,7 +7,7 @@ from typing import Callable, Dict
 from dv2s_gym.pipeline.sg.rules.frame import KIND_SPEEDS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.kerb import spawn_puller
 from dv2s_gym.pipeline.sg.rules.lane_context import LaneContext
-from dv2s_gym.pipeline.sg.rules.lane_traffic import place_in_lane
+from dv2s_gym.pipeline.sg.rules.lane_traffic import place_adjacent, place_follower, place_lead, place_slow_lead
 from dv2s_gym.pipeline.sg.rules.lane_vehicles import place_cutter, place_oncoming, place_overtaker, place_ramp
 from dv2s_gym.pipeline.sg.rules.pedestrians import spawn_lane_pedestrians
 from dv2s_gym.pipeline.sg.rules.placement import driving
@@ -39,10 +39,10 @@ SPAWNERS: Dict[Role, Spawner] = {
     Role.ONCOMING: driving(place_oncoming),
     Role.CUTTER: driving(place_cutter),
     Role.OVERTAKER: driving(place_overtaker),
-    Role.LEAD: driving(place_in_lane),
-    Role.FOLLOWER: driving(place_in_lane),
-    Role.SLOW_LEAD: driving(place_in_lane),
-    Role.ADJACENT: driving(place_in_lane),
+    Role.LEAD: driving(place_lead),
+    Role.FOLLOWER: driving(place_follower),
+    Role.SLOW_LEAD: driving(place_slow_lead),
+    Role.ADJACENT: driving(place_adjacent),
 }
 """Role -> the function that writes an actor of that role into section 4 (with the speed it drives at)."""
 
