@@ -368,13 +368,13 @@ def test_an_untouched_set_the_start_failed_entirely_is_called_vacuous_in_the_ver
     record = _accepted_round()
     record["steps"]["untouched"] = {"policies": policies(6), "fine_tuned_vs_start": {"verdict": "PASS", "reason": "r"}}
     verdict = recommendation(_report(record))
-    assert verdict["verdict"] == "ACCEPTED"
-    assert "on the untouched set the starting policy failed every untouched episode (6 of 6)" in verdict["reason"]
-    assert "non-inferiority against it is vacuous" in verdict["reason"]
+    assert verdict.verdict == "ACCEPTED"
+    assert "on the untouched set the starting policy failed every untouched episode (6 of 6)" in verdict.reason
+    assert "non-inferiority against it is vacuous" in verdict.reason
     lines = _untouched_lines(UntouchedComparison.from_dict({"scenarios": ["a"], "seeds": 6, "policies": policies(6)}))
     assert any(line.startswith("- **WARNING: the starting policy failed every untouched episode") for line in lines)
     record["steps"]["untouched"]["policies"] = policies(5)  # one passed: the comparison can fail, so it says something
-    assert "vacuous" not in recommendation(_report(record))["reason"]
+    assert "vacuous" not in recommendation(_report(record)).reason
     lines = _untouched_lines(UntouchedComparison.from_dict({"scenarios": ["a"], "seeds": 6, "policies": policies(5)}))
     assert not any("WARNING" in line for line in lines)
 
