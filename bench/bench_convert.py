@@ -60,7 +60,7 @@ def cold_convert_seconds(video: Path, runs: int) -> dict:
 def main(argv=None) -> int:
     import cv2
 
-    from dv2s_gym.pipeline.convert import convert_video
+    from dv2s_gym.pipeline.convert import checks_passed, convert_video
     from dv2s_gym.pipeline.evaluate import EVALSET_DIR, collect_items
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -88,8 +88,8 @@ def main(argv=None) -> int:
             report = convert_video(item.video, Path(tmp) / f"{k:03d}")
             wall = time.perf_counter() - start
             rows.append({"stem": item.stem, "video_s": video_seconds, "wall": wall,
-                         "per_10s": wall * 10.0 / video_seconds, "ok": bool(report.get("check", {}).get("ok")),
-                         "e2e_sc": report.get("e2e_sc")})
+                         "per_10s": wall * 10.0 / video_seconds, "ok": checks_passed(report),
+                         "e2e_sc": report.e2e_sc})
             print(f"{item.stem:45s} {wall:6.2f} s for {video_seconds:4.1f} s of video "
                   f"({rows[-1]['per_10s']:.2f} s per 10 s)  ok={rows[-1]['ok']}", flush=True)
     per10 = [r["per_10s"] for r in rows]

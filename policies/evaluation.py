@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import gymnasium as gym
@@ -38,7 +38,9 @@ class EpisodeResult:
 
     ``failed`` is the regression tests' failure event: a collision or leaving the road.
     ``success`` additionally asks that the ego kept going (at least
-    :data:`SUCCESS_MIN_DISTANCE` metres) until the episode ended.
+    :data:`SUCCESS_MIN_DISTANCE` metres) until the episode ended. ``min_ttc_time`` is when the minimum TTC
+    happened [s] and ``min_ttc_with`` the road user it was measured against (``None``: no vehicle was on a
+    collision course); the JSON form (:meth:`to_json`) keeps these two in its ``extra`` object.
     """
 
     scenario: str
@@ -56,7 +58,8 @@ class EpisodeResult:
     steps: int
     trajectory_hash: str
     error: Optional[str] = None
-    extra: Dict[str, Any] = field(default_factory=dict)
+    min_ttc_time: Optional[float] = None
+    min_ttc_with: Optional[str] = None
 
     @property
     def failed(self) -> bool:
@@ -67,6 +70,7 @@ class EpisodeResult:
         """A JSON-safe dict (infinite TTC becomes ``None``)."""
         data = asdict(self)
         data["min_ttc"] = None if not math.isfinite(self.min_ttc) else self.min_ttc
+        data["extra"] = {key: data.pop(key) for key in _IN_EXTRA}
         data["failed"] = self.failed
         return data
 
@@ -75,7 +79,12 @@ class EpisodeResult:
         """Inverse of :meth:`to_json`."""
         data = {k: v for k, v in data.items() if k != "failed"}
         data["min_ttc"] = math.inf if data.get("min_ttc") is None else float(data["min_ttc"])
-        return cls(**data)
+        extra = data.pop("extra", None) or {}
+        return cls(**data, **{key: extra.get(key) for key in _IN_EXTRA})
+
+
+_IN_EXTRA = ("min_ttc_time", "min_ttc_with")
+"""The fields of :class:`EpisodeResult` its JSON form holds in its ``extra`` object (as results were first written)."""
 
 
 def trajectory_hash(trace) -> str:
@@ -139,7 +148,7 @@ def run_episode(env: gym.Env, policy: Policy, scenario: str, seed: int, determin
         off_road=off_road, success=not collided and not off_road and travelled >= SUCCESS_MIN_DISTANCE,
         min_ttc=float(info["min_ttc"]), mean_speed=float(np.mean(speeds)) if speeds else 0.0,
         distance=travelled, episode_return=total, steps=steps, trajectory_hash=trajectory_hash(trace),
-        extra={"min_ttc_time": info.get("min_ttc_time"), "min_ttc_with": info.get("min_ttc_with")},
+        min_ttc_time=info.get("min_ttc_time"), min_ttc_with=info.get("min_ttc_with"),
     )
     return result, trace
 

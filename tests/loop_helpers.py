@@ -18,6 +18,13 @@ from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
 
 
+def written_report(body: Dict[str, Any]) -> Dict[str, Any]:
+    """A loop report's ``body`` with its recommendation, as the loop writes every ``report.json``."""
+    from dv2s_gym.mining.loop_verdict import recommendation
+
+    return {**body, "recommendation": recommendation(body).to_dict()}
+
+
 def add_mined_copy(bank_dir: str, source: str, name: str, cluster: str, parent: str | None = None) -> str:
     """Copy shipped scenario ``source`` into ``bank_dir`` as entry ``name`` (kind ``mined``) whose provenance
     names ``parent`` (default ``source``) as the scenario it was mined from."""

@@ -12,7 +12,10 @@ from dv2s_gym.cli import build_parser
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import env_config_option, json_option, json_value
 from dv2s_gym.mining.loop_settings import FINE_TUNE_METHODS
-from dv2s_gym.pipeline.convert import checks_passed, generated, placed_nothing
+from dv2s_gym.cli.convert import report_text
+from dv2s_gym.pipeline.convert import (UNPLACED_WARNING, ConversionReport, ScenarioCheck, checks_passed, generated,
+                                       placed_nothing)
+from dv2s_gym.pipeline.stages import Description, Generation
 from dv2s_gym.pipeline.prompts import CAMERA_VIEWPOINTS
 from dv2s_gym.story import UnknownEgoError, check_stories
 from envs.trace import saved_file_schema
@@ -29,13 +32,32 @@ def _choices(argv, option):
     return next(a.choices for a in sub._actions if option in a.option_strings)
 
 
+def _conversion(elements, warnings=(), ok=True, sp=0.5):
+    return ConversionReport(
+        description=Description("a text", elements, backend="user"),
+        generation=Generation("script", "rules", warnings=list(warnings),
+                              intended_elements={"participants": ["ego"], "actions": []}),
+        check=ScenarioCheck(safe=True, compiled=True, sampled=True, ran=ok), sp=sp, files=["report.json"])
+
+
 def test_a_generation_report_decides_its_own_outcome():
-    nothing = {"description": {"elements": {"road": None, "participants": [], "actions": [], "relations": []}},
-               "generation": {"intended_elements": {"participants": ["ego"], "actions": []}}, "check": {"ok": True}}
+    nothing = _conversion({"road": None, "participants": [], "actions": [], "relations": []})
     assert placed_nothing(nothing) and checks_passed(nothing) and not generated(nothing)
-    placed = {**nothing, "description": {"elements": {"road": "highway"}}}
-    assert generated(placed) and not generated({**placed, "check": {"ok": False}})
+    placed = _conversion({"road": "highway"})
+    assert generated(placed) and not generated(_conversion({"road": "highway"}, ok=False))
+    failed = ConversionReport(description=placed.description, generation_error="ValueError: no", files=["report.json"])
+    assert not placed_nothing(failed) and not checks_passed(failed) and not generated(failed)
     assert not hasattr(__import__("dv2s_gym.cli.convert", fromlist=["x"]), "placed_nothing")
+
+
+def test_whether_the_sp_scores_only_the_placed_parts_is_the_reports_own():
+    partly = _conversion({"road": "highway"}, warnings=[f"{UNPLACED_WARNING}: 'while the sun sets'"])
+    assert partly.partial_sp and not _conversion({"road": "highway"}, warnings=["not shown: x"]).partial_sp
+    assert not _conversion({"road": "highway"}, warnings=[f"{UNPLACED_WARNING}: 'x'"], sp=None).partial_sp
+    text = report_text(partly, "out")
+    assert "\nSP: 0.50 (of the parts of the description that were placed)\n" in text
+    assert "warning: could not place: 'while the sun sets'" in text and "checks: safe=ok" in text
+    assert "SP: 0.50\n" in report_text(_conversion({"road": "highway"}), "out")
 
 
 def test_a_story_check_names_an_unknown_scenario_or_ego_as_a_project_error():

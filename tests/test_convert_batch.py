@@ -11,7 +11,8 @@ import pytest
 
 from dv2s_gym.cli import main
 from dv2s_gym.pipeline.batch_convert import videos_to_convert
-from dv2s_gym.pipeline.convert import ConvertSettings, add_converted, conversion_provenance, convert_video
+from dv2s_gym.pipeline.convert import (ConversionReport, ConvertSettings, ScenarioCheck, add_converted, checks_passed,
+                                       conversion_provenance, convert_video)
 from dv2s_gym.pipeline.stages import Description, Generation
 import scenario_bank.atomic as atomic
 from scenario_bank.bank import Bank
@@ -55,7 +56,8 @@ def test_conversion_provenance_reads_the_same_from_the_stages_and_from_their_rep
 
 
 def test_a_conversion_whose_checks_failed_is_not_added_and_the_bank_is_not_touched(tmp_path):
-    report = {"check": {"ok": False}, "description": {"text": "x", "elements": {}}, "generation": {}}
+    report = ConversionReport(description=Description("x", {}, backend="bev"),
+                              generation=Generation("param map = 1", backend="rules"), check=ScenarioCheck(safe=True))
     note = add_converted(tmp_path / "bank", "clip.webm", tmp_path / "out", report, seed=0, dra="bev", sg="rules")
     assert note == "(not added: clip.webm failed validation)"
     assert not (tmp_path / "bank").exists()
@@ -89,5 +91,11 @@ def test_a_video_conversion_writes_its_whole_report_in_one_atomic_step(tmp_path,
                         lambda path, *a, **k: (written.append(Path(path).name), real(path, *a, **k))[1])
     report = convert_video(CLIP, tmp_path / "out", ConvertSettings(seconds=2))
     assert written.count("report.json") == 1  # inside the staged folder, moved into out with the other files
-    on_disk = json.loads((tmp_path / "out" / "report.json").read_text())
-    assert on_disk == json.loads(json.dumps(report, default=str)) and on_disk["seconds_total"] >= on_disk["seconds"]
+    text = (tmp_path / "out" / "report.json").read_text()
+    assert text == json.dumps(report.to_json(), indent=2, default=str) + "\n"
+    on_disk = json.loads(text)
+    assert on_disk["seconds_total"] >= on_disk["seconds"] and report.seconds_total == on_disk["seconds_total"]
+    assert list(on_disk)[:3] == ["description", "generation", "check"] and on_disk["check"]["ok"] == checks_passed(report)
+    # read back, the same report and the same file
+    again = ConversionReport.from_json(on_disk)
+    assert json.dumps(again.to_json(), indent=2, default=str) + "\n" == text

@@ -109,7 +109,7 @@ def toy_type():
 def _episode(speeds, **result):
     values = dict(scenario="s", seed=0, scene_seed=0, params={}, collided=False, collisions=[], off_road=False,
                   success=True, min_ttc=math.inf, mean_speed=10.0, distance=100.0, episode_return=0.0, steps=0,
-                  trajectory_hash="h", error=None, extra={})
+                  trajectory_hash="h", error=None)
     values.update(result)
     trace = EpisodeTrace(scenario="s", source="test", seed=0, scene_seed=0, params={}, config={"policy_frequency": 5},
                          states=[{"ego": [2.0 * i, 0.0, 0.0, v]} for i, v in enumerate(speeds)], events=[],

@@ -20,7 +20,7 @@ from dv2s_gym.mining.loop_record import HeldOutComparison, RoundRecord
 from dv2s_gym.mining.split import family_of, split_by_family
 from dv2s_gym.workers.settings import WorkerSettings
 from cli_helpers import one_line_error, run
-from loop_helpers import FakeMiner, run_loop
+from loop_helpers import FakeMiner, run_loop, written_report
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
 from policies.training import EVAL_SEED_BASE, TrainingError
@@ -190,7 +190,8 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     start[2]["failure"] = {"type": "off_road"}
     after = heldout_comparison(start, tuned, control, min_episodes=1)
     record = {"round": 1, "steps": {"after": after}}
-    markdown = render_markdown({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo", "rounds": [record]})
+    markdown = render_markdown(written_report({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo",
+                                               "rounds": [record]}))
     # most severe first, each type by its label in the failure table
     assert "- held-out failures by type: start collision 1, off road 1, stall 1; control none; fine-tuned stall 1" \
         in markdown
@@ -1216,8 +1217,8 @@ def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected
     (tmp_path / "episodes.jsonl").write_text("")
     mined = _mining_summary(tmp_path)
     assert mined["rejected_reasons"] == reasons + ["check: compile failed"] and mined["rejected_reason_count"] == 3
-    markdown = render_markdown({"settings": {"policy": "dv2s-ppo"}, "rounds": [
-        {"round": 1, "steps": {"mine": {**mined, "kept": [], "folder": str(tmp_path)}}}]})
+    markdown = render_markdown(written_report({"settings": {"policy": "dv2s-ppo"}, "rounds": [
+        {"round": 1, "steps": {"mine": {**mined, "kept": [], "folder": str(tmp_path)}}}]}))
     for reason in mined["rejected_reasons"]:
         assert f"  - rejected: {reason}" in markdown
 
@@ -1304,7 +1305,8 @@ def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_freq
     merged = merged_messages([found, errored_episodes([{"scenario": "s1", "error": "worker hung"}])])
     assert merged["s1"][0] == {"message": "worker hung", "count": 4}
     record = {"round": 1, "steps": {"mine": {"episodes": 20, "errors": 11, "errored": found}}}
-    markdown = render_markdown({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo", "rounds": [record]})
+    markdown = render_markdown(written_report({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo",
+                                               "rounds": [record]}))
     assert "- `s1`: worker hung (3 episodes); worker crashed (2 episodes); c (2 episodes)" in markdown
     assert "a (1 episode); and 2 more distinct message(s) in 2 episode(s)" in markdown
 

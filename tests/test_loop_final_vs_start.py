@@ -160,8 +160,8 @@ def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_direct
     unread = final_vs_start(body)
     assert "cannot read" in unread["error"]
     verdict = recommendation({**body, "final_vs_start": unread})
-    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["exit_code"] == 3 and verdict["policy"] == "p1"
-    assert "could not run" in verdict["reason"]
+    assert verdict.verdict == "NOT ACCEPTED" and verdict.exit_code == 3 and verdict.policy == "p1"
+    assert "could not run" in verdict.reason
 
 
 def test_the_loop_records_regression_report_paths_that_do_not_depend_on_the_working_directory(tmp_path, monkeypatch):
@@ -183,3 +183,19 @@ def test_a_round_begun_from_another_policy_than_the_rounds_before_it_recommend_i
     with pytest.raises(loop_module.LoopError, match="round 2 .* was begun from p0, not from p1.*--out"):
         loop_module._run_round(loop, 2, "p1")  # ... where round 1 recommends p1
     assert record["policy"] == "p0" and list(record["steps"]) == ["mine"]
+
+
+def test_a_rounds_cross_round_check_is_a_field_written_as_read_null_included(tmp_path):
+    body = _loop(tmp_path, 2)
+    paths = write_loop_reports({**body, "rounds": [_accepted(record) for record in body["rounds"]]}, tmp_path / "loop")
+    written = json.loads(paths["json"].read_text())["rounds"]
+    # round 1: fewer than two tested rounds up to it, so no check could be made (null); round 2: FAIL against P0
+    assert "final_vs_start" in written[0] and written[0]["final_vs_start"] is None
+    first, second = (RoundRecord.from_dict(record) for record in written)
+    assert first.cross_round_checked and first.final_vs_start is None and "final_vs_start" not in first.extra
+    assert second.final_vs_start["verdict"] == "FAIL" and first.to_dict() == written[0]
+    unchecked = RoundRecord.from_dict({"round": 1})
+    assert not unchecked.cross_round_checked and "final_vs_start" not in unchecked.to_dict()
+    assert unchecked.with_cross_round_check(None).to_dict() == {**unchecked.to_dict(), "final_vs_start": None}
+    assert unchecked.with_cross_round_check(None).with_cross_round_check({"error": "x"}).to_dict() == {
+        **unchecked.to_dict(), "final_vs_start": {"error": "x"}}

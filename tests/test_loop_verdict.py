@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from dv2s_gym.mining.loop_verdict import FAMILY_RULE, heldout_worse, recommendation
+from loop_helpers import written_report
 
 
 def _round(number, verdict, *, control_only=0, fine_tuned_only=0, p=1.0):
@@ -33,41 +36,41 @@ def _report(*rounds, **extra):
 
 def test_the_last_accepted_policy_is_recommended_and_a_later_regression_is_not():
     verdict = recommendation(_report(_round(1, "PASS"), _round(2, "FAIL")))
-    assert verdict["verdict"] == "REJECTED" and verdict["exit_code"] == 1
-    assert verdict["policy"] == "ppo:round_1/policy/model.zip" and verdict["candidate"].startswith("ppo:round_2")
-    assert "keep the last accepted policy ppo:round_1/policy/model.zip" in verdict["sentence"]
-    assert "regressed on the rest of the bank" in verdict["sentence"] and "FAILed (reason 2)" in verdict["sentence"]
-    assert verdict["decided_by"] == "regression"
+    assert verdict.verdict == "REJECTED" and verdict.exit_code == 1
+    assert verdict.policy == "ppo:round_1/policy/model.zip" and verdict.candidate.startswith("ppo:round_2")
+    assert "keep the last accepted policy ppo:round_1/policy/model.zip" in verdict.sentence
+    assert "regressed on the rest of the bank" in verdict.sentence and "FAILed (reason 2)" in verdict.sentence
+    assert verdict.decided_by == "regression"
 
 
 def test_an_accepted_last_round_is_used():
     verdict = recommendation(_report(_round(1, "FAIL"), _round(2, "PASS")))
-    assert verdict["verdict"] == "ACCEPTED" and verdict["exit_code"] == 0
-    assert verdict["policy"] == "ppo:round_2/policy/model.zip"
-    assert verdict["sentence"].startswith("ACCEPTED: use the round 2 fine-tuned policy ppo:round_2/policy/model.zip")
+    assert verdict.verdict == "ACCEPTED" and verdict.exit_code == 0
+    assert verdict.policy == "ppo:round_2/policy/model.zip"
+    assert verdict.sentence.startswith("ACCEPTED: use the round 2 fine-tuned policy ppo:round_2/policy/model.zip")
 
 
 def test_rounds_that_each_pass_but_regress_against_the_start_over_all_rounds_are_rejected():
     final = {"verdict": "FAIL", "rounds": [1, 2], "reason": "fails more often"}
     verdict = recommendation(_report(_round(1, "PASS"), _round(2, "PASS"), final_vs_start=final))
-    assert verdict["verdict"] == "REJECTED" and verdict["policy"] == "dv2s-ppo"
-    assert "over rounds 1, 2 the fine-tuned policy regressed against the starting one" in verdict["reason"]
+    assert verdict.verdict == "REJECTED" and verdict.policy == "dv2s-ppo"
+    assert "over rounds 1, 2 the fine-tuned policy regressed against the starting one" in verdict.reason
 
 
 def test_a_control_that_fails_significantly_fewer_held_out_episodes_rejects_the_policy():
     beaten = recommendation(_report(_round(1, "PASS", control_only=0, fine_tuned_only=8, p=0.008)))
-    assert beaten["verdict"] == "REJECTED" and "the control" in beaten["reason"] and beaten["policy"] == "dv2s-ppo"
-    assert beaten["decided_by"] == "heldout_vs_control" and "one-sided exact McNemar" in beaten["reason"]
+    assert beaten.verdict == "REJECTED" and "the control" in beaten.reason and beaten.policy == "dv2s-ppo"
+    assert beaten.decided_by == "heldout_vs_control" and "one-sided exact McNemar" in beaten.reason
     untested = recommendation(_report(_round(1, "PASS", control_only=0, fine_tuned_only=4, p=None)))
-    assert untested["verdict"] == "NOT ACCEPTED" and "did not run" in untested["reason"]  # no test, no acceptance
+    assert untested.verdict == "NOT ACCEPTED" and "did not run" in untested.reason  # no test, no acceptance
 
 
 def test_an_inconclusive_test_or_no_fine_tuned_policy_is_not_accepted():
     inconclusive = recommendation(_report(_round(1, "INCONCLUSIVE")))
-    assert inconclusive["verdict"] == "NOT ACCEPTED" and inconclusive["exit_code"] == 3
-    assert inconclusive["policy"] == "dv2s-ppo" and "keep the starting policy dv2s-ppo" in inconclusive["sentence"]
+    assert inconclusive.verdict == "NOT ACCEPTED" and inconclusive.exit_code == 3
+    assert inconclusive.policy == "dv2s-ppo" and "keep the starting policy dv2s-ppo" in inconclusive.sentence
     skipped = recommendation(_report({"round": 1, "steps": {"skipped": "nothing kept"}}))
-    assert skipped["verdict"] == "NOT ACCEPTED" and skipped["policy"] == "dv2s-ppo" and skipped["round"] is None
+    assert skipped.verdict == "NOT ACCEPTED" and skipped.policy == "dv2s-ppo" and skipped.round is None
 
 
 def test_loop_help_documents_each_exit_status(capsys):
@@ -86,12 +89,12 @@ def test_a_round_too_small_to_judge_says_so_and_points_to_the_evidence_profile()
     small = _round(1, "INCONCLUSIVE")
     small["steps"]["after"]["underpowered"] = "only 16 held-out episode(s)"
     verdict = recommendation(_report(small))
-    assert verdict["verdict"] == "NOT ACCEPTED" and "too few held-out episodes" in verdict["too_small"]
-    assert "TOO SMALL TO JUDGE" in verdict["sentence"] and "dv2s loop --profile evidence" in verdict["sentence"]
+    assert verdict.verdict == "NOT ACCEPTED" and "too few held-out episodes" in verdict.too_small
+    assert "TOO SMALL TO JUDGE" in verdict.sentence and "dv2s loop --profile evidence" in verdict.sentence
     judged = recommendation(_report(_round(1, "PASS")))
-    assert judged["too_small"] is None and "TOO SMALL" not in judged["sentence"]
+    assert judged.too_small is None and "TOO SMALL" not in judged.sentence
     failed = recommendation(_report(_round(1, "FAIL")))
-    assert failed["verdict"] == "REJECTED" and failed["too_small"] is None
+    assert failed.verdict == "REJECTED" and failed.too_small is None
 
 
 # --------------------------------------------------------------------------- the held-out tests, as the loop records them
@@ -120,10 +123,10 @@ def test_a_fine_tuned_policy_significantly_worse_than_the_start_on_the_held_out_
                                control=lambda f, s, seed: True)
     worse = summary["significantly_worse"]
     assert worse["start"]["worse"] and not worse["control"]["worse"] and worse["start"]["families"] == 4
-    assert verdict["verdict"] == "REJECTED" and verdict["policy"] == "dv2s-ppo"
-    assert verdict["decided_by"] == "heldout_vs_start"
-    assert "significantly worse than the starting policy on the held-out families" in verdict["reason"]
-    assert "one-sided exact McNemar tests per held-out family and pooled" in verdict["reason"]
+    assert verdict.verdict == "REJECTED" and verdict.policy == "dv2s-ppo"
+    assert verdict.decided_by == "heldout_vs_start"
+    assert "significantly worse than the starting policy on the held-out families" in verdict.reason
+    assert "one-sided exact McNemar tests per held-out family and pooled" in verdict.reason
 
 
 def test_a_harm_confined_to_one_held_out_family_is_not_averaged_away():
@@ -134,22 +137,22 @@ def test_a_harm_confined_to_one_held_out_family_is_not_averaged_away():
     verdict, summary = _judged(before=lambda f, s, seed: True, after=after, control=control)
     test = summary["significantly_worse"]["control"]
     assert test["worse"] and test["worse_families"] == ["family_3"] and test["fine_tuned_only"] == 8
-    assert verdict["verdict"] == "REJECTED" and verdict["decided_by"] == "heldout_vs_control"
-    assert "family_3" in verdict["reason"] and "the control" in verdict["reason"]
+    assert verdict.verdict == "REJECTED" and verdict.decided_by == "heldout_vs_control"
+    assert "family_3" in verdict.reason and "the control" in verdict.reason
 
 
 def test_an_accepted_policy_passed_every_test_and_the_reason_names_them():
     verdict, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False,
                                control=lambda f, s, seed: seed < 1)
     assert not summary["significantly_worse"]["start"]["worse"]
-    assert verdict["verdict"] == "ACCEPTED" and verdict["decided_by"] == "all"
+    assert verdict.verdict == "ACCEPTED" and verdict.decided_by == "all"
     for text in ("regression test on the rest of the bank", "PASSed", "not significantly worse than the starting "
                  "policy", "not significantly worse than the control", "one-sided exact McNemar"):
-        assert text in verdict["reason"], text
+        assert text in verdict.reason, text
     without_control, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False,
                                        control=None)
     assert summary["significantly_worse"]["control"] is None
-    assert without_control["verdict"] == "ACCEPTED" and "no control arm" in without_control["reason"]
+    assert without_control.verdict == "ACCEPTED" and "no control arm" in without_control.reason
 
 
 def test_held_out_tests_that_could_not_run_leave_the_policy_not_accepted():
@@ -157,8 +160,8 @@ def test_held_out_tests_that_could_not_run_leave_the_policy_not_accepted():
     verdict, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False,
                                control=lambda f, s, seed: seed < 1, min_families=5)
     assert summary["significantly_worse"] == {"start": None, "control": None} and summary["underpowered"]
-    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_vs_start"
-    assert "did not run" in verdict["reason"] and "TOO SMALL TO JUDGE" in verdict["sentence"]
+    assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "heldout_vs_start"
+    assert "did not run" in verdict.reason and "TOO SMALL TO JUDGE" in verdict.sentence
 
 
 def test_a_policy_the_cross_round_check_rejected_is_never_the_policy_to_use():
@@ -168,10 +171,10 @@ def test_a_policy_the_cross_round_check_rejected_is_never_the_policy_to_use():
     final = {"verdict": "PASS", "rounds": [1, 3], "reason": "no worse"}
     for last in ("FAIL", "INCONCLUSIVE"):
         verdict = recommendation(_report(_round(1, "PASS"), second, _round(3, last), final_vs_start=final))
-        assert verdict["policy"] == "dv2s-ppo" and "keep the starting policy dv2s-ppo" in verdict["sentence"]
+        assert verdict.policy == "dv2s-ppo" and "keep the starting policy dv2s-ppo" in verdict.sentence
     # a later accepted round that passes the check is used again
     verdict = recommendation(_report(_round(1, "PASS"), second, _round(3, "PASS"), final_vs_start=final))
-    assert verdict["verdict"] == "ACCEPTED" and verdict["policy"] == "ppo:round_3/policy/model.zip"
+    assert verdict.verdict == "ACCEPTED" and verdict.policy == "ppo:round_3/policy/model.zip"
 
 
 # --------------------------------------------------------------------------- the evidence floor
@@ -197,13 +200,39 @@ def test_minimums_of_zero_do_not_let_a_single_held_out_pair_be_judged():
     record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
               "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
     verdict = recommendation(_report(record))
-    assert verdict["verdict"] == "NOT ACCEPTED" and "TOO SMALL TO JUDGE" in verdict["sentence"]
+    assert verdict.verdict == "NOT ACCEPTED" and "TOO SMALL TO JUDGE" in verdict.sentence
     # five pairs are still too few; six (all one family) are judged
     five = [{"scenario": "f0_s0", "seed": seed, "failed": False, "error": None} for seed in range(5)]
     assert heldout_comparison(five, five, None, min_episodes=0, min_families=0)["underpowered"]
     six = five + [{"scenario": "f0_s0", "seed": 5, "failed": False, "error": None}]
     judged = heldout_comparison(six, six, None, min_episodes=0, min_families=0)
     assert "underpowered" not in judged and judged["significantly_worse"]["start"]["pairs"] == 6
+
+
+def test_the_recommendation_is_a_record_written_as_a_json_object_and_every_report_has_one(tmp_path):
+    from dv2s_gym.mining.loop import LoopReport
+    from dv2s_gym.mining.loop_report import render_markdown
+    from dv2s_gym.mining.loop_settings import LoopError
+    from dv2s_gym.mining.loop_verdict import Recommendation
+
+    body = _report(_round(1, "FAIL"), _round(2, "PASS"))
+    verdict = recommendation(body)
+    data = verdict.to_dict()
+    assert list(data) == ["policy", "verdict", "round", "candidate", "reason", "decided_by", "exit_code", "too_small",
+                          "sentence"]
+    assert Recommendation.from_dict(data) == verdict and data["too_small"] is None and data["round"] == 2
+    assert list(recommendation({"rounds": []}).to_dict()) == list(data)  # no round fine-tuned: the same fields
+    with pytest.raises(LoopError, match=r"the loop report \(report.json\) holds no recommendation; .*rerun the loop"):
+        render_markdown(body)  # no fallback: the loop writes the recommendation into every report
+    with pytest.raises(LoopError, match="recommendation has no sentence"):
+        Recommendation.from_dict({k: v for k, v in data.items() if k != "sentence"})
+    written = tmp_path / "report.json"
+    written.write_text('{"schema": "dv2s-loop", "rounds": []}')
+    report = LoopReport(out=tmp_path, rounds=[], policy="p", paths={"json": written}, settings={"policy": "p"})
+    with pytest.raises(LoopError, match=f"{written} holds no recommendation"):
+        report.recommendation  # noqa: B018 - the property reads the file
+    written.write_text(json.dumps({"recommendation": data}))
+    assert report.recommendation == verdict
 
 
 def test_a_minimum_that_can_never_give_evidence_is_flagged_in_the_help_the_log_and_the_report():
@@ -213,12 +242,12 @@ def test_a_minimum_that_can_never_give_evidence_is_flagged_in_the_help_the_log_a
     assert evidence_floor_note(20, 3) is None and evidence_floor_note(6, 1) is None
     note = evidence_floor_note(0, 0)
     assert "--min-heldout-episodes 0 is below 6" in note and "--min-heldout-families 0" in note
-    text = render_markdown({"settings": {"policy": "dv2s-ppo", "min_heldout_episodes": 1, "min_heldout_families": 3},
-                            "policy": "dv2s-ppo", "rounds": []})
+    text = render_markdown(written_report({"settings": {"policy": "dv2s-ppo", "min_heldout_episodes": 1,
+                                                  "min_heldout_families": 3}, "policy": "dv2s-ppo", "rounds": []}))
     assert "WARNING: --min-heldout-episodes 1 is below 6" in text and "can never" not in text.split("WARNING")[0]
-    assert "WARNING" not in render_markdown({"settings": {"policy": "dv2s-ppo", "min_heldout_episodes": 20,
-                                                          "min_heldout_families": 3}, "policy": "dv2s-ppo",
-                                             "rounds": []})
+    assert "WARNING" not in render_markdown(written_report({"settings": {"policy": "dv2s-ppo", "min_heldout_episodes": 20,
+                                                                   "min_heldout_families": 3}, "policy": "dv2s-ppo",
+                                                      "rounds": []}))
 
 
 def test_loop_help_says_below_what_minimum_no_test_can_be_significant(capsys):
@@ -244,14 +273,14 @@ def test_a_harm_in_one_family_the_gate_calls_inconclusive_is_not_accepted():
     row = start["family_harm"]["families"]["family_3"]
     assert row["difference"] == pytest.approx(3 / 8) and not row["non_inferior"] and row["interval"][0] < 0
     assert not summary["significantly_worse"]["control"]["family_harm"]["harmed"]
-    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_families_vs_start"
-    assert "in family family_3 the fine-tuned policy failed 3 of 8 pairs" in verdict["reason"]
-    assert "Holm" in verdict["reason"] and verdict["policy"] == "dv2s-ppo"
+    assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "heldout_families_vs_start"
+    assert "in family family_3 the fine-tuned policy failed 3 of 8 pairs" in verdict.reason
+    assert "Holm" in verdict.reason and verdict.policy == "dv2s-ppo"
     from dv2s_gym.mining.loop_report import render_markdown
 
     record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
               "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
-    markdown = render_markdown(_report(record))
+    markdown = render_markdown(written_report(_report(record)))
     assert "**harm not ruled out in family_3**" in markdown and "family_3 +37.5 pp" in markdown
     # the same round judged at a margin the harm stays within is accepted
     from dv2s_gym.mining.loop import heldout_comparison
@@ -261,7 +290,7 @@ def test_a_harm_in_one_family_the_gate_calls_inconclusive_is_not_accepted():
                               families=families, min_families=3, margin=0.4)
     record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
               "steps": {"fine_tune": {}, "after": wide, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
-    assert recommendation(_report(record))["verdict"] == "ACCEPTED"
+    assert recommendation(_report(record)).verdict == "ACCEPTED"
 
 
 def test_a_harm_in_one_family_against_the_control_is_not_accepted_either():
@@ -269,7 +298,7 @@ def test_a_harm_in_one_family_against_the_control_is_not_accepted_either():
     verdict, summary = _judged(before=lambda f, s, seed: True, after=after, control=lambda f, s, seed: f > 0)
     assert not summary["significantly_worse"]["control"]["worse"]
     assert summary["significantly_worse"]["control"]["family_harm"]["harmed"] == ["family_0"]
-    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_families_vs_control"
+    assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "heldout_families_vs_control"
 
 
 def test_a_round_no_worse_in_any_family_is_still_accepted():
@@ -281,7 +310,7 @@ def test_a_round_no_worse_in_any_family_is_still_accepted():
     harm = summary["significantly_worse"]["start"]["family_harm"]
     assert harm["harmed"] == [] and harm["non_inferior"] == []  # 8 pairs per family cannot show it at 2 pp
     assert all(row["difference"] == 0 for row in harm["families"].values())
-    assert verdict["verdict"] == "ACCEPTED" and "no held-out family worse for the fine-tuned policy" in verdict["reason"]
+    assert verdict.verdict == "ACCEPTED" and "no held-out family worse for the fine-tuned policy" in verdict.reason
 
 
 def test_non_inferiority_p_is_below_the_level_exactly_when_the_interval_is_below_the_margin():
@@ -317,14 +346,14 @@ def _accepted_round():
 
 def test_a_fine_tuned_policy_that_fails_on_the_untouched_set_is_not_accepted():
     record = _accepted_round()
-    assert recommendation(_report(record))["verdict"] == "ACCEPTED"
+    assert recommendation(_report(record)).verdict == "ACCEPTED"
     record["steps"]["untouched"] = {"fine_tuned_vs_start": {"verdict": "FAIL", "reason": "fails more often: +73 pp"}}
     verdict = recommendation(_report(record))
-    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "untouched"
-    assert "untouched scenario set" in verdict["reason"] and "(fails more often: +73 pp)" in verdict["reason"]
-    assert verdict["policy"] == "dv2s-ppo"
+    assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "untouched"
+    assert "untouched scenario set" in verdict.reason and "(fails more often: +73 pp)" in verdict.reason
+    assert verdict.policy == "dv2s-ppo"
     record["steps"]["untouched"]["fine_tuned_vs_start"]["verdict"] = "PASS"
-    assert recommendation(_report(record))["verdict"] == "ACCEPTED"
+    assert recommendation(_report(record)).verdict == "ACCEPTED"
 
 
 def test_an_untouched_set_the_start_failed_entirely_is_called_vacuous_in_the_verdict_and_the_report():
@@ -339,13 +368,13 @@ def test_an_untouched_set_the_start_failed_entirely_is_called_vacuous_in_the_ver
     record = _accepted_round()
     record["steps"]["untouched"] = {"policies": policies(6), "fine_tuned_vs_start": {"verdict": "PASS", "reason": "r"}}
     verdict = recommendation(_report(record))
-    assert verdict["verdict"] == "ACCEPTED"
-    assert "on the untouched set the starting policy failed every untouched episode (6 of 6)" in verdict["reason"]
-    assert "non-inferiority against it is vacuous" in verdict["reason"]
+    assert verdict.verdict == "ACCEPTED"
+    assert "on the untouched set the starting policy failed every untouched episode (6 of 6)" in verdict.reason
+    assert "non-inferiority against it is vacuous" in verdict.reason
     lines = _untouched_lines(UntouchedComparison.from_dict({"scenarios": ["a"], "seeds": 6, "policies": policies(6)}))
     assert any(line.startswith("- **WARNING: the starting policy failed every untouched episode") for line in lines)
     record["steps"]["untouched"]["policies"] = policies(5)  # one passed: the comparison can fail, so it says something
-    assert "vacuous" not in recommendation(_report(record))["reason"]
+    assert "vacuous" not in recommendation(_report(record)).reason
     lines = _untouched_lines(UntouchedComparison.from_dict({"scenarios": ["a"], "seeds": 6, "policies": policies(5)}))
     assert not any("WARNING" in line for line in lines)
 
@@ -355,8 +384,8 @@ def test_an_inconclusive_cross_round_check_is_named_in_the_reason():
     second.update(round=2, policy=first["new_policy"], new_policy="ppo:round_2/policy/model.zip")
     final = {"verdict": "INCONCLUSIVE", "reason": "+6.0 pp, 95% CI -1 to +13 pp", "rounds": [1, 2]}
     verdict = recommendation(_report(first, second, final_vs_start=final))
-    assert "over rounds 1, 2" in verdict["reason"] and "was INCONCLUSIVE (+6.0 pp, 95% CI -1 to +13 pp)" in verdict["reason"]
-    assert "INCONCLUSIVE" in verdict["sentence"]
+    assert "over rounds 1, 2" in verdict.reason and "was INCONCLUSIVE (+6.0 pp, 95% CI -1 to +13 pp)" in verdict.reason
+    assert "INCONCLUSIVE" in verdict.sentence
 
 
 def test_loop_help_names_the_family_harm_rule_and_the_untouched_set(capsys):
@@ -399,14 +428,14 @@ def test_a_family_exactly_at_the_margin_is_not_harmed_and_one_pair_more_is(pairs
     assert row["difference"] == limit and not row["harm"] and test["family_harm"]["harmed"] == []
     assert not test["worse"]  # the significance gate never fires here: only the harm rule decides
     verdict = recommendation(_report(equal))
-    assert verdict["verdict"] == "ACCEPTED" and verdict["decided_by"] == "all"
+    assert verdict.verdict == "ACCEPTED" and verdict.decided_by == "all"
     more = _one_family_round(at + 1, pairs=pairs, margin=margin)
     test = more["steps"]["after"]["significantly_worse"]["start"]
     assert not test["worse"] and test["family_harm"]["harmed"] == ["F"]
     verdict = recommendation(_report(more))
-    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_families_vs_start"
-    assert f"in family F the fine-tuned policy failed {at + 1} of {pairs} pairs" in verdict["reason"]
-    assert verdict["policy"] == "dv2s-ppo" and verdict["exit_code"] == 3
+    assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "heldout_families_vs_start"
+    assert f"in family F the fine-tuned policy failed {at + 1} of {pairs} pairs" in verdict.reason
+    assert verdict.policy == "dv2s-ppo" and verdict.exit_code == 3
 
 
 def test_family_non_inferiority_is_shown_at_one_sided_2_5_percent_after_holm_and_the_report_says_so():
@@ -428,14 +457,14 @@ def test_family_non_inferiority_is_shown_at_one_sided_2_5_percent_after_holm_and
     # the one-sided p is where the upper end of the two-sided interval crosses the margin
     assert paired_difference_interval(table, 1 - 2 * 0.0305)[1] > 0.02 > paired_difference_interval(
         table, 1 - 2 * 0.0307)[1]
-    markdown = render_markdown(_report(record))
+    markdown = render_markdown(written_report(_report(record)))
     line = next(text for text in markdown.splitlines() if text.startswith("- held-out families against the starting"))
     assert "no family worse by more than the margin" in line and "F -30.0 pp (95% CI " in line
     assert line.endswith("; not shown)") and "one-sided 0.025" in line
     shown = _one_family_round(0, pairs=40, other_only=12)
     row = shown["steps"]["after"]["significantly_worse"]["start"]["family_harm"]["families"]["F"]
     assert row["holm_p"] < 0.025 and row["non_inferior"]
-    line = next(text for text in render_markdown(_report(shown)).splitlines()
+    line = next(text for text in render_markdown(written_report(_report(shown))).splitlines()
                 if text.startswith("- held-out families against the starting"))
     assert line.endswith("; non-inferior)")
     # Holm over two families doubles the smaller p: each alone is shown (p = 0.018), together neither is (0.035)
@@ -555,29 +584,29 @@ def test_a_held_out_test_that_did_not_run_says_which_and_why():
 def test_the_cross_round_check_changes_only_an_accepted_verdict():
     final = {"verdict": "FAIL", "rounds": [1, 2], "reason": "worse"}
     kept = recommendation(_report(_round(1, "PASS"), _round(2, "INCONCLUSIVE"), final_vs_start=final))
-    assert kept["verdict"] == "NOT ACCEPTED" and kept["decided_by"] == "regression"
-    assert kept["policy"] == "ppo:round_1/policy/model.zip"
+    assert kept.verdict == "NOT ACCEPTED" and kept.decided_by == "regression"
+    assert kept.policy == "ppo:round_1/policy/model.zip"
     passed = recommendation(_report(_round(1, "PASS"), _round(2, "PASS"),
                                     final_vs_start={"verdict": "PASS", "rounds": [1, 2], "reason": "no worse"}))
     alone = recommendation(_report(_round(2, "PASS")))
-    assert passed["verdict"] == "ACCEPTED" and passed["reason"] == alone["reason"] and "INCONCLUSIVE" not in passed["reason"]
+    assert passed.verdict == "ACCEPTED" and passed.reason == alone.reason and "INCONCLUSIVE" not in passed.reason
     # without the report's own check, the last round's recorded one applies
     last = {**_round(2, "PASS"), "final_vs_start": final}
     judged = recommendation(_report(_round(1, "PASS"), last))
-    assert judged["verdict"] == "REJECTED" and judged["decided_by"] == "final_vs_start" and judged["policy"] == "dv2s-ppo"
+    assert judged.verdict == "REJECTED" and judged.decided_by == "final_vs_start" and judged.policy == "dv2s-ppo"
 
 
 def test_the_candidate_is_the_rounds_own_policy_and_only_a_not_accepted_round_is_too_small():
     unnamed = _round(1, "PASS")
     del unnamed["new_policy"]
     verdict = recommendation({**_report(unnamed), "policy": "ppo:loop/policy.zip"})
-    assert verdict["verdict"] == "ACCEPTED" and verdict["policy"] == verdict["candidate"] == "ppo:loop/policy.zip"
+    assert verdict.verdict == "ACCEPTED" and verdict.policy == verdict.candidate == "ppo:loop/policy.zip"
     named = recommendation({**_report(_round(1, "FAIL")), "policy": "ppo:elsewhere.zip"})
-    assert named["candidate"] == "ppo:round_1/policy/model.zip"
+    assert named.candidate == "ppo:round_1/policy/model.zip"
     rejected = _round(1, "FAIL")
     rejected["steps"]["after"]["underpowered"] = "only 5 held-out episode(s)"
     verdict = recommendation(_report(rejected))
-    assert verdict["verdict"] == "REJECTED" and verdict["too_small"] is None and "TOO SMALL" not in verdict["sentence"]
+    assert verdict.verdict == "REJECTED" and verdict.too_small is None and "TOO SMALL" not in verdict.sentence
 
 
 def test_family_non_inferiority_at_the_edge_of_one_sided_2_5_percent():

@@ -21,6 +21,7 @@ from dv2s_gym.mining.exact_replay import replay_failure
 from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_video, write_failure_video
 from dv2s_gym.pipeline.video import read_video
 from envs.trace import EpisodeTrace
+from loop_helpers import written_report
 from policies.evaluation import trajectory_hash
 from scenario_bank.bank import Bank, Sidecar
 from scenario_bank.errors import WrongTypeError
@@ -229,7 +230,7 @@ def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_pat
                                      "way as the source failure")
     (replay,) = clips[f"{out['replay_entry']} (fine-tuned on)"]
     assert replay["path"] == f"bank/{out['replay_entry']}/failure.webm" and "no converted script" in replay["note"]
-    page = loop_html(loop, {1: clips})
+    page = loop_html(written_report(loop), {1: clips})
     row = page.split(f'<video src="bank/{out["bank_entry"]}/failure.webm"')[1].split("</div>")[0]
     assert f'<video src="bank/{out["bank_entry"]}/converted.webm"' in row and f"seed {seed}: it failed" in row
     assert "it has no converted script, so only the failure clip is shown" in page

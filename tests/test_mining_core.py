@@ -181,7 +181,7 @@ def test_decoded_params_are_accepted_by_the_env(mixed_bank):
 def _result(**overrides) -> EpisodeResult:
     data = dict(scenario="s", seed=0, scene_seed=0, params={}, collided=False, collisions=[], off_road=False,
                 success=True, min_ttc=math.inf, mean_speed=10.0, distance=100.0, episode_return=0.0, steps=0,
-                trajectory_hash="h", error=None, extra={})
+                trajectory_hash="h", error=None)
     data.update(overrides)
     return EpisodeResult(**data)
 
@@ -256,9 +256,17 @@ def test_stall_needs_a_free_path_ahead():
     assert detect_failure(_result(), _trace(split)) is None
 
 
+def test_the_min_ttc_time_and_actor_are_fields_written_in_the_results_extra_object():
+    close = _result(min_ttc=0.6, min_ttc_time=1.2, min_ttc_with="car1")
+    data = close.to_json()
+    assert data["extra"] == {"min_ttc_time": 1.2, "min_ttc_with": "car1"} and list(data)[-2:] == ["extra", "failed"]
+    assert "min_ttc_time" not in data and EpisodeResult.from_json(data) == close
+    assert _result().to_json()["extra"] == {"min_ttc_time": None, "min_ttc_with": None}
+
+
 def test_low_ttc_off_road_and_severity_order():
     moving = [{"ego": [2.0 * k, 0.0, 0.0, 10.0]} for k in range(10)]
-    close = _result(min_ttc=0.6, extra={"min_ttc_time": 1.2, "min_ttc_with": "car1"})
+    close = _result(min_ttc=0.6, min_ttc_time=1.2, min_ttc_with="car1")
     failure = detect_failure(close, _trace(moving, kinds={"car1": "car"}))
     assert (failure.type, failure.with_, failure.with_kind, failure.step) == ("low_ttc", "car1", "car", 6)
     assert failure.min_ttc == pytest.approx(0.6)
@@ -278,7 +286,7 @@ def test_robustness_is_negative_exactly_for_failures():
         (_result(collided=True, collisions=["c"]),
          _trace(moving, [{"time": 0.4, "kind": "collision", "actors": ["ego", "c"]}], {"c": "car"})),
         (_result(off_road=True), _trace(moving)),
-        (_result(min_ttc=0.2, extra={"min_ttc_time": 0.4, "min_ttc_with": "c"}), _trace(moving)),
+        (_result(min_ttc=0.2, min_ttc_time=0.4, min_ttc_with="c"), _trace(moving)),
         (_result(min_ttc=0.999), _trace(moving)),
         (_result(), _trace(_standing(STALL_STEPS))),
         (_result(min_ttc=1.0), _trace(moving)),

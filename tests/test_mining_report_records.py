@@ -11,6 +11,7 @@ from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.html import _cards, _Videos
 from dv2s_gym.mining.loop_record import RoundRecord
 from dv2s_gym.mining.loop_report import _entry_clips
+from loop_helpers import written_report
 
 KEEP_LANE = ConversionSettings(policy="keep_lane")
 """The conversion settings of the tests: the deterministic policy that fails."""
@@ -146,7 +147,7 @@ def test_every_kept_entry_of_the_loop_report_shows_its_clip_or_why_it_has_none(t
     assert "ego_speed" not in video["note"]  # the reason in short
     (none,) = clips[f"{extra.name} (held out)"]
     assert none["path"] is None and "no clip recorded" in none["note"] and "extra exact replay" in none["note"]
-    page = render_html(report, {1: clips})
+    page = render_html(written_report(report), {1: clips})
     assert page.count("<video") == 1
     assert "an extra exact replay of a cluster no conversion tried: no clip recorded" in page
     assert "rejected (parameters: the new scenario&#x27;s ranges do not contain the failing values)" in page

@@ -55,16 +55,17 @@ JSON_BOUNDARIES: Dict[str, str] = {
                               "is owned by the conversion (dv2s_gym.mining.convert), which has no typed record for "
                               "them yet",
     "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
-    "loop.LoopReport.recommendation": "returns report.json's recommendation (loop_verdict.recommendation's JSON object)",
     "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
     "loop.heldout_comparison": "takes the held-out store's rows (heldout.jsonl) and returns the after step's JSON "
                                "object, which the loop reads as a HeldOutComparison",
     "loop.untouched_settings": "takes the policy's env config, a JSON object of its model card",
     "loop_record.HeldOutComparison.held_out_test": "returns one recorded held-out test (loop_verdict.heldout_worse's "
                                                    "JSON object in the after step's significantly_worse)",
+    "loop_record.RoundRecord.with_cross_round_check": "takes the cross-round check as report.json records it in a "
+                                                      "round (loop_report.final_vs_start's JSON object)",
     "loop_verdict.family_harm": "returns the held-out families' harm check as loop.json records it in a held-out test",
     "loop_verdict.heldout_worse": "returns a held-out test as loop.json records it (significantly_worse)",
-    "loop_verdict.recommendation": "takes the body of report.json and returns its recommendation object",
+    "loop_verdict.recommendation": "takes the body of report.json (and returns its typed Recommendation)",
     "loop_report.final_vs_start": "takes the body of report.json and returns its final_vs_start object",
     "loop_report.with_cross_round_checks": "takes and returns the body of report.json",
     "loop_report.errored_text": "takes errored episodes per policy (dv2s_gym.mining.errored.errored_episodes' JSON "

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dv2s_gym.cli.backend_options import sg_option
 from dv2s_gym.cli.errors import UsageError
@@ -13,6 +14,9 @@ from dv2s_gym.cli.inputs import description_text, input_file, llm_config, output
 from dv2s_gym.cli.output import emit, json_text
 from dv2s_gym.cli.parser import bank_option, llm_options, video_options
 from dv2s_gym.pipeline.stages import describe, Description
+
+if TYPE_CHECKING:  # the pipeline is imported when a command runs
+    from dv2s_gym.pipeline.convert import ConversionReport
 
 __all__ = ["add_parser", "report_text", "run_convert", "run_describe", "run_generate"]
 
@@ -83,7 +87,7 @@ def run_generate(args: argparse.Namespace) -> int:
     description = Description(text.strip(), elements_from_text(text), backend="user")
     report = generate_to_folder(description, Path(args.out), sg=args.sg, seed=args.seed,
                                 llm_config=llm_config(args), seconds=args.seconds)
-    emit(args, report, report_text(report, args.out, nothing_placed=placed_nothing(report)))
+    emit(args, report.to_json(), report_text(report, args.out, nothing_placed=placed_nothing(report)))
     return 0 if generated(report) else 1
 
 
@@ -92,26 +96,24 @@ NOTHING_PLACED = ("nothing of the description could be placed, so the script onl
                   "'on a highway, a car ahead of the ego brakes suddenly'")
 
 
-def report_text(report, out, nothing_placed: bool = False) -> str:
+def report_text(report: "ConversionReport", out, nothing_placed: bool = False) -> str:
     """A conversion's report as text: the description, what failed, the checks, the scores and the files;
     with ``nothing_placed``, the line saying so and how to fix it in place of the warnings and the SP."""
-    generation = report.get("generation", {})
-    check = report.get("check", {})
-    lines = [f"description: {report['description']['text']}"]
+    check = report.check
+    lines = [f"description: {report.description.text}"]
     if not nothing_placed:
-        lines.extend(f"warning: {warning}" for warning in generation.get("warnings") or [])
-    if "error" in generation:
-        lines.append(f"generation failed: {generation['error']}")
-    if check:
-        stages = " ".join(f"{k}={'ok' if check.get(k) else 'FAIL'}" for k in ("safe", "compiled", "sampled", "ran"))
-        lines.append(f"checks: {stages}" + (f" ({check['error']})" if check.get("error") else ""))
-    for key in ("sp", "e2e_sc"):
-        if key in report and not nothing_placed:
-            partial = key == "sp" and any(str(w).startswith("could not place")
-                                          for w in generation.get("warnings") or [])
-            lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}"
+        lines.extend(f"warning: {warning}" for warning in report.warnings)
+    if report.generation_error is not None:
+        lines.append(f"generation failed: {report.generation_error}")
+    if check is not None:
+        stages = " ".join(f"{k}={'ok' if getattr(check, k) else 'FAIL'}"
+                          for k in ("safe", "compiled", "sampled", "ran"))
+        lines.append(f"checks: {stages}" + (f" ({check.error})" if check.error else ""))
+    for name, score, partial in (("SP", report.sp, report.partial_sp), ("E2E-SC", report.e2e_sc, False)):
+        if score is not None and not nothing_placed:
+            lines.append(f"{name}: {score:.2f}"
                          + (" (of the parts of the description that were placed)" if partial else ""))
-    files = report.get("files") or []
+    files = report.files
     lines.append(f"written to {out}/ ({', '.join(files)})" if files else f"nothing written to {out}/")
     if nothing_placed:
         lines.append(NOTHING_PLACED)
@@ -133,7 +135,7 @@ def run_convert(args: argparse.Namespace) -> int:
         added = [add_converted(args.bank, v, o, r, seed=args.seed, dra=args.dra, sg=args.sg)
                  for (v, o), r in zip(pairs, reports)]
     if args.json:
-        print(json_text({"reports": reports, "added": added}))
+        print(json_text({"reports": [report.to_json() for report in reports], "added": added}))
     else:
         for (v, o), r in zip(pairs, reports):
             print(f"== {v}\n{report_text(r, o)}")

@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or DEFAULT_OUT
     report = run_loop(args.policy, loop_settings(args), out=out, progress=not args.no_progress)
     print("\n".join(summary_lines(report)))
-    return int(report.recommendation["exit_code"])
+    return int(report.recommendation.exit_code)
 
 
 _PARSED_HERE = ("bank_dir", "n_envs", "control", "fine_tune_reward", "max_conversions", "max_replays")
@@ -190,7 +190,7 @@ def summary_lines(report: "LoopReport") -> List[str]:
 
     lines = [round_summary(record) for record in report.rounds]
     verdict = report.recommendation
-    lines += ["", f"verdict: {verdict.get('sentence')}", f"policy to use: {verdict.get('policy')}"]
+    lines += ["", f"verdict: {verdict.sentence}", f"policy to use: {verdict.policy}"]
     lines += [f"report ({kind}): {report.paths[kind]}" for kind in ("html", "md", "json") if kind in report.paths]
     return lines
 

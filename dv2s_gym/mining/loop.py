@@ -82,7 +82,7 @@ from dv2s_gym.mining.loop_record import (
 from dv2s_gym.mining.loop_report import errored_note, errored_text, reference_gate_text, write_loop_reports
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
 from dv2s_gym.mining.loop_verdict import (
-    EVIDENCE_FLOOR, evidence_floor_note, HELDOUT_ALPHA, heldout_worse, recommendation)
+    EVIDENCE_FLOOR, evidence_floor_note, HELDOUT_ALPHA, heldout_worse, Recommendation, recommendation)
 from dv2s_gym.mining.miner import MineSettings, RunOrigin
 from dv2s_gym.mining.replays import reference_passed, replay_clusters, replay_entries, REPLAYS_FILE
 from dv2s_gym.mining.split import family_of, split_by_family
@@ -134,17 +134,17 @@ class LoopReport:
         """A JSON-safe dict (the body of ``report.json``)."""
         body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings,
                 "policy": self.policy, "rounds": [record.to_dict() for record in self.rounds]}
-        return {**body, "recommendation": recommendation(body)}
+        return {**body, "recommendation": recommendation(body).to_dict()}
 
     @property
-    def recommendation(self) -> Dict[str, Any]:
+    def recommendation(self) -> Recommendation:
         """Which policy to use and why (:func:`dv2s_gym.mining.loop_verdict.recommendation`), as ``report.json``
-        has it once written (with the final-vs-starting comparison of two or more rounds)."""
+        has it once written (with the final-vs-starting comparison of two or more rounds); a written report without
+        one is a :class:`LoopError` naming it."""
         path = self.paths.get("json")
         if path is not None and Path(path).is_file():
             written = json.loads(Path(path).read_text(encoding="utf-8")).get("recommendation")
-            if written:
-                return written
+            return Recommendation.from_dict(written, source=str(path))
         return recommendation(self.to_json())
 
 
@@ -648,11 +648,11 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
                                                 "rounds": [r.to_dict() for r in rounds]}, folder=loop.out)
     advice = recommendation(body)
     # the policy to use, exactly as the report recommends it: the fine-tuned one only when it is the recommendation
-    following = advice["policy"]
+    following = advice.policy
     if not record.fine_tuned:
-        reason = f"this round fine-tuned no policy; {advice['sentence']}"
+        reason = f"this round fine-tuned no policy; {advice.sentence}"
     else:
-        reason = advice["sentence"]
+        reason = advice.sentence
     if following != start:
         following = _earlier_round_spec(following, loop, number + 1)
     if (record.next_policy, record.next_policy_reason) != (following, reason):

@@ -490,7 +490,9 @@ class RoundRecord(JsonRecord):
     """One round of a loop: its number (``round``), each finished step (``steps``, :class:`RoundSteps`) and its
     seconds (``timings``), the ``policy`` it started from, the fine-tuned ``new_policy`` and ``control_policy``, and
     the ``next_policy`` the next round starts from with its ``next_policy_reason``. A round of ``report.json`` also
-    carries its cross-round check (``final_vs_start``, in ``extra``)."""
+    carries its cross-round check (``final_vs_start``: :func:`dv2s_gym.mining.loop_report.final_vs_start` over the
+    rounds up to it, recorded for a round its own tests accepted; ``null`` when fewer than two rounds up to it were
+    regression-tested, see :attr:`cross_round_checked`)."""
 
     round: int
     steps: RoundSteps = field(default_factory=RoundSteps)
@@ -500,12 +502,13 @@ class RoundRecord(JsonRecord):
     control_policy: Optional[str] = None
     next_policy: Optional[str] = None
     next_policy_reason: Optional[str] = None
+    final_vs_start: Optional[Mapping[str, Any]] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
     _KINDS: ClassVar[Dict[str, str]] = {"round": "int", "steps": "object", "timings": "object", "policy": "str",
                                         "new_policy": "str", "control_policy": "str", "next_policy": "str",
-                                        "next_policy_reason": "str"}
+                                        "next_policy_reason": "str", "final_vs_start": "object"}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("round",)
     _NESTED: ClassVar[Dict[str, type]] = {"steps": RoundSteps}
     _WHAT: ClassVar[str] = "round"
@@ -523,6 +526,19 @@ class RoundRecord(JsonRecord):
         steps = RoundSteps.from_dict({**self.steps.to_dict(), step: value})
         timings = self.timings if seconds is None else {**self.timings, step: seconds}
         return self.replace(steps=steps, timings=timings)
+
+    @property
+    def cross_round_checked(self) -> bool:
+        """Whether the round records its cross-round check (``final_vs_start``, its ``null`` included: no check
+        could be made over the rounds up to it)."""
+        return self.final_vs_start is not None or "final_vs_start" in (self.null_fields or ())
+
+    def with_cross_round_check(self, checked: Optional[Mapping[str, Any]]) -> "RoundRecord":
+        """A copy recording its cross-round check ``checked`` (``None``: written as ``null``, no check could be
+        made)."""
+        nulls = self.default_null_fields() if self.null_fields is None else self.null_fields
+        nulls = nulls | {"final_vs_start"} if checked is None else nulls - {"final_vs_start"}
+        return self.replace(final_vs_start=checked, null_fields=nulls)
 
     @property
     def fine_tuned(self) -> bool:

@@ -104,8 +104,8 @@ from dv2s_gym.mining.loop_record import (
     HeldOutComparison, MinedEntry, MiningSummary, ReferenceGate, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
     UntouchedComparison)
 from dv2s_gym.mining.report_text import by_type_text, clip_caption
-from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, evidence_floor_note, judge_round,
-                                         recommendation)
+from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, Recommendation, evidence_floor_note,
+                                         judge_round, recommendation)
 from dv2s_gym.regress.records import BankInfo, PairedComparison, PairedEpisode, Summary
 from dv2s_gym.regress.report import build_report, load_report, write_json
 from html import escape
@@ -218,9 +218,9 @@ def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = Non
     rounds = _rounds(report)
     for index, record in enumerate(rounds):
         judged = judge_round(record)
-        if judged is not None and judged["verdict"] == ACCEPTED and "final_vs_start" not in record.extra:
+        if judged is not None and judged["verdict"] == ACCEPTED and not record.cross_round_checked:
             checked = final_vs_start({"rounds": rounds[:index + 1]}, folder=folder or out)
-            rounds[index] = record.replace(extra={**record.extra, "final_vs_start": checked})
+            rounds[index] = record.with_cross_round_check(checked)
     body = {**report, "rounds": [record.to_dict() for record in rounds]}
     if "final_vs_start" not in body:
         final = final_vs_start(body, out, folder)
@@ -544,9 +544,9 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
     return lines
 
 
-def _recommendation(report: Mapping[str, Any]) -> Mapping[str, Any]:
-    """The report's recommendation (worked out for a report written without one)."""
-    return report.get("recommendation") or recommendation(report)
+def _recommendation(report: Mapping[str, Any]) -> Recommendation:
+    """The report's recommendation (every loop report has one: a body without it is a :class:`LoopError`)."""
+    return Recommendation.from_dict(report.get("recommendation"), source="the loop report (report.json)")
 
 
 def _floor_lines(settings: Mapping[str, Any]) -> List[str]:
@@ -559,11 +559,12 @@ def _floor_lines(settings: Mapping[str, Any]) -> List[str]:
 def _heading_lines(report: Mapping[str, Any]) -> List[str]:
     """The report's title, where the loop started and ended, and its recommendation."""
     settings = report.get("settings", {})
+    advice = _recommendation(report)
     return [
         "# dv2s loop", "",
         f"Started from `{settings.get('policy')}`; last fine-tuned policy `{report.get('policy')}`.", "",
-        f"**{_recommendation(report)['sentence']}**", "",
-        f"Policy to use: `{_recommendation(report)['policy']}`.", "",
+        f"**{advice.sentence}**", "",
+        f"Policy to use: `{advice.policy}`.", "",
     ]
 
 
@@ -885,6 +886,7 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
     """A self-contained HTML page (inline CSS, nothing fetched) of the loop report; ``clips``: round -> scenario ->
     ``[{"path", "label"}]`` videos shown per round (:func:`round_clips`)."""
     settings = report.get("settings", {})
+    advice = _recommendation(report)
     rounds = _rounds(report)
     rows = []
     for record in rounds:
@@ -917,9 +919,9 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
             f"last fine-tuned policy <code>{escape(str(report.get('policy')))}</code>.</p>"
-            f"<p class=\"{escape(_recommendation(report)['verdict'].replace(' ', '_'))}\"><b>"
-            f"{escape(_recommendation(report)['sentence'])}</b></p><p>Policy to use: <code>"
-            f"{escape(str(_recommendation(report)['policy']))}</code></p><p>Mining budget {settings.get('budget')} "
+            f"<p class=\"{escape(advice.verdict.replace(' ', '_'))}\"><b>"
+            f"{escape(advice.sentence)}</b></p><p>Policy to use: <code>"
+            f"{escape(str(advice.policy))}</code></p><p>Mining budget {settings.get('budget')} "
             f"episodes per round, at most {escape(str('every' if settings.get('max_conversions') is None else settings.get('max_conversions')))} cluster(s) "
             f"converted, {escape(_replays_text(settings))}, "
             f"fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "
@@ -1096,7 +1098,7 @@ def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
 
     report = with_cross_round_checks(report, out)
-    report["recommendation"] = recommendation(report)
+    report["recommendation"] = recommendation(report).to_dict()
     paths = {"json": atomic_write_json(out / "report.json", dict(report), indent=1) or out / "report.json"}
     markdown = render_markdown(report)
     atomic_write_text(out / "report.md", markdown)

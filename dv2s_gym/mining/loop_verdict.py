@@ -30,15 +30,16 @@ recommendation back to the starting policy, so it is never the policy to use.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Dict, Mapping, Optional
 
 from dv2s_gym.mining.loop_record import HeldOutComparison, RegressComparison, RegressSummary, RoundRecord, RoundSteps
-from dv2s_gym.mining.loop_settings import DEFAULTS
+from dv2s_gym.mining.loop_settings import DEFAULTS, LoopError
 
 __all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
            "FAMILY_RULE", "family_harm", "non_inferiority_p",
            "EVIDENCE_HINT", "EVIDENCE_FLOOR", "fewest_significant_pairs", "evidence_floor_note", "judge_round",
-           "heldout_worse", "too_small", "recommendation"]
+           "heldout_worse", "too_small", "Recommendation", "recommendation"]
 
 ACCEPTED, REJECTED, NOT_ACCEPTED = "ACCEPTED", "REJECTED", "NOT ACCEPTED"
 EXIT_CODES = {ACCEPTED: 0, REJECTED: 1, NOT_ACCEPTED: 3}
@@ -338,28 +339,69 @@ def _with_cross_round_check(judged: Dict[str, str], final: Optional[Mapping[str,
     return judged
 
 
-def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
-    """The loop's recommendation from its report (``report.json``'s body).
+@dataclasses.dataclass(frozen=True)
+class Recommendation:
+    """Which policy a loop recommends and why (:func:`recommendation`); ``report.json``'s ``recommendation`` is its
+    :meth:`to_dict`."""
 
-    Returns ``{"policy": the recommended spec, "verdict": the last fine-tuned policy's (ACCEPTED, REJECTED,
-    NOT ACCEPTED), "round", "candidate": that policy's spec, "reason", "sentence": one line for people,
-    "decided_by": the test that decided (:func:`judge_round`; ``final_vs_start`` for the comparison over the
-    rounds), "exit_code", "too_small": why a NOT ACCEPTED round was too small to judge (:func:`too_small`; the sentence
-    then points to the evidence profile) or ``None``}``."""
+    policy: Optional[str]
+    """The spec of the policy to use."""
+    verdict: str
+    """The verdict on the last fine-tuned policy: ACCEPTED, REJECTED or NOT ACCEPTED."""
+    round: Optional[int]
+    """The number of the round that fine-tuned it (``None``: no round fine-tuned a policy)."""
+    candidate: Optional[str]
+    """That policy's spec."""
+    reason: str
+    """Why, naming the test that decided."""
+    decided_by: Optional[str]
+    """The test that decided (:func:`judge_round`; ``final_vs_start`` for the comparison over the rounds)."""
+    exit_code: int
+    """``dv2s loop``'s exit status (:data:`EXIT_CODES`)."""
+    too_small: Optional[str]
+    """Why a NOT ACCEPTED round was too small to judge (:func:`too_small`; the sentence then points to the evidence
+    profile), or ``None``."""
+    sentence: str
+    """The verdict in one line for people."""
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The JSON object ``report.json`` holds (every field, ``null`` included)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Any, source: str = "the loop report") -> "Recommendation":
+        """The recommendation of a JSON object :meth:`to_dict` wrote; :class:`LoopError` names ``source`` (the file
+        or report it was read from) when there is none or a field is missing."""
+        if isinstance(data, cls):
+            return data
+        names = [field.name for field in dataclasses.fields(cls)]
+        if not isinstance(data, Mapping):
+            raise LoopError(f"{source} holds no recommendation; it is written with every loop report: rerun the "
+                            "loop in its folder to write the report again")
+        missing = [name for name in names if name not in data]
+        if missing:
+            raise LoopError(f"{source}'s recommendation has no {', '.join(missing)}; rerun the loop in its folder "
+                            "to write the report again")
+        return cls(**{name: data[name] for name in names})
+
+
+def recommendation(report: Mapping[str, Any]) -> Recommendation:
+    """The loop's recommendation from its report (``report.json``'s body): the policy to use, the verdict on the
+    last fine-tuned policy and why (:class:`Recommendation`)."""
     start = (report.get("settings") or {}).get("policy")
     rounds = [RoundRecord.from_dict(record) for record in report.get("rounds") or []]
     judged_rounds = [(record, judged) for record in rounds for judged in [judge_round(record)] if judged is not None]
     if not judged_rounds:
-        return {"policy": start, "verdict": NOT_ACCEPTED, "round": None, "candidate": None,
-                "reason": "no round fine-tuned a policy", "decided_by": None, "exit_code": EXIT_CODES[NOT_ACCEPTED],
-                "too_small": None,
-                "sentence": f"NOT ACCEPTED: no round fine-tuned a policy; keep the starting policy {start}"}
+        return Recommendation(policy=start, verdict=NOT_ACCEPTED, round=None, candidate=None,
+                              reason="no round fine-tuned a policy", decided_by=None,
+                              exit_code=EXIT_CODES[NOT_ACCEPTED], too_small=None,
+                              sentence=f"NOT ACCEPTED: no round fine-tuned a policy; keep the starting policy {start}")
     recommended = start
     for index, (record, judged) in enumerate(judged_rounds):
         # the cross-round check on this round's policy: the report's own for the last round, else the one
         # recorded with the round (the check over the rounds up to it)
         final = (report.get("final_vs_start") if index == len(judged_rounds) - 1 and "final_vs_start" in report
-                 else record.extra.get("final_vs_start"))
+                 else record.final_vs_start)
         judged = _with_cross_round_check(judged, final)
         judged_rounds[index] = (record, judged)
         if judged["verdict"] == ACCEPTED:
@@ -378,6 +420,6 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
     small = too_small(record) if judged["verdict"] == NOT_ACCEPTED else None
     if small:
         sentence += f". TOO SMALL TO JUDGE ({small}): {EVIDENCE_HINT}"
-    return {"policy": recommended, "verdict": judged["verdict"], "round": number, "candidate": candidate,
-            "reason": judged["reason"], "decided_by": judged.get("decided_by"),
-            "exit_code": EXIT_CODES[judged["verdict"]], "too_small": small, "sentence": sentence}
+    return Recommendation(policy=recommended, verdict=judged["verdict"], round=number, candidate=candidate,
+                          reason=judged["reason"], decided_by=judged.get("decided_by"),
+                          exit_code=EXIT_CODES[judged["verdict"]], too_small=small, sentence=sentence)

@@ -177,9 +177,8 @@ def _off_road(result, trace, settings: MonitorSettings) -> Optional[Failure]:
 def _low_ttc(result, trace, settings: MonitorSettings) -> Optional[Failure]:
     if not result.min_ttc < settings.ttc_threshold:
         return None
-    time = result.extra.get("min_ttc_time")
-    time = float(time) if time is not None else 0.0
-    other = result.extra.get("min_ttc_with") or None
+    time = float(result.min_ttc_time) if result.min_ttc_time is not None else 0.0
+    other = result.min_ttc_with or None
     return Failure("low_ttc", time, _step_at(trace, time), other, trace.kinds.get(other) if other else None,
                    None, float(result.min_ttc))
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple
+from typing import List, Optional, Tuple
 from concurrent.futures import ProcessPoolExecutor
 
 from tqdm import tqdm
 
-from dv2s_gym.pipeline.convert import ConvertSettings, convert_video
+from dv2s_gym.pipeline.convert import ConversionReport, ConvertSettings, convert_video
 from dv2s_gym.pipeline.evaluate import VIDEO_SUFFIXES
 from scenario_bank.errors import MissingFileError
 
@@ -29,7 +29,7 @@ def videos_to_convert(source: str | os.PathLike, out: str | os.PathLike) -> List
 
 
 def convert_videos(pairs: List[Tuple[Path, Path]], settings: Optional[ConvertSettings] = None, *, jobs: int = 1,
-                   progress: bool = True) -> List[Dict[str, Any]]:
+                   progress: bool = True) -> List[ConversionReport]:
     """:func:`convert_video` with ``settings`` for each (video, output folder) pair, in ``jobs`` processes when
     there are several; returns the reports in the order of ``pairs``."""
     reports = []

@@ -32,7 +32,8 @@ from dv2s_gym.pipeline.labels import label_path_for, read_label
 from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
 from scenario_bank.bank import Bank, Provenance, Sidecar
 
-__all__ = ["ConvertSettings", "ScenarioCheck", "add_converted", "check_scenario", "checks_passed", "classify_failure", "generated", "placed_nothing", "conversion_provenance", "convert_video",
+__all__ = ["ConversionReport", "ConvertSettings", "ScenarioCheck", "UNPLACED_WARNING", "add_converted",
+           "check_scenario", "checks_passed", "classify_failure", "generated", "placed_nothing", "conversion_provenance", "convert_video",
            "generate_to_folder", "label_for"]
 
 
@@ -122,6 +123,83 @@ def label_for(video: Path) -> Optional[Dict[str, Any]]:
     return read_label(path).elements
 
 
+UNPLACED_WARNING = "could not place"
+"""How a generation's warning about a part of its description it left out starts (the rules SG's, one per part):
+the SP of such a generation scores only the parts that were placed (:attr:`ConversionReport.partial_sp`)."""
+
+
+@dataclass(frozen=True)
+class ConversionReport:
+    """What a conversion did (:func:`generate_to_folder`, :func:`convert_video`): the description, the generation
+    (or why it failed), the script's checks and scores, the files written and the seconds taken.
+    :meth:`to_json` is the folder's ``report.json``."""
+
+    description: Description
+    generation: Optional[Generation] = None
+    """The generated script and its warnings (``None``: the generation failed, :attr:`generation_error`)."""
+    generation_error: Optional[str] = None
+    """Why the generation failed (``"<error type>: <message>"``), or ``None``."""
+    generation_error_category: Optional[str] = None
+    """That failure's category (:func:`classify_failure`), or ``None``."""
+    check: Optional[ScenarioCheck] = None
+    """The script's checks (``None``: no script was generated)."""
+    sp: Optional[float] = None
+    """Semantic preservation of the description in the simulated run (``None``: the script did not run)."""
+    e2e_sc: Optional[float] = None
+    """End-to-end semantic consistency with the video's label (``None``: no label, or the script did not run)."""
+    seconds: float = 0.0
+    """Seconds of the generation and its checks."""
+    files: List[str] = field(default_factory=list)
+    """The files of :data:`OUTPUT_FILES` written to the output folder."""
+    seconds_total: Optional[float] = None
+    """Seconds of the whole conversion, description included (``None``: not measured)."""
+
+    @property
+    def warnings(self) -> List[str]:
+        """The generation's warnings (none when it failed)."""
+        return list(self.generation.warnings) if self.generation is not None else []
+
+    @property
+    def partial_sp(self) -> bool:
+        """Whether :attr:`sp` scores only the parts of the description that were placed: the generation left a part
+        out (a warning starting with :data:`UNPLACED_WARNING`)."""
+        return self.sp is not None and any(str(w).startswith(UNPLACED_WARNING) for w in self.warnings)
+
+    def to_json(self) -> Dict[str, Any]:
+        """The report as ``report.json`` holds it: ``description``, ``generation`` (``{"error", "category"}`` when
+        it failed), ``check`` (with ``ok``), ``sp`` and ``e2e_sc`` when scored, ``seconds``, ``files`` and
+        ``seconds_total`` when measured."""
+        data: Dict[str, Any] = {"description": self.description.as_dict()}
+        if self.generation_error is not None:
+            data["generation"] = {"error": self.generation_error, "category": self.generation_error_category}
+        elif self.generation is not None:
+            data["generation"] = self.generation.as_dict()
+        if self.check is not None:
+            data["check"] = {**asdict(self.check), "ok": self.check.ok}
+        for key in ("sp", "e2e_sc"):
+            if getattr(self, key) is not None:
+                data[key] = getattr(self, key)
+        data["seconds"] = self.seconds
+        data["files"] = list(self.files)
+        if self.seconds_total is not None:
+            data["seconds_total"] = self.seconds_total
+        return data
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> "ConversionReport":
+        """The report :meth:`to_json` wrote (a conversion folder's ``report.json``, read)."""
+        generation = data.get("generation") or {}
+        failed = "error" in generation
+        check = data.get("check")
+        return cls(description=Description.from_dict(data["description"]),
+                   generation=None if failed or not generation else Generation.from_dict(generation),
+                   generation_error=generation.get("error") if failed else None,
+                   generation_error_category=generation.get("category") if failed else None,
+                   check=None if check is None else ScenarioCheck(**{k: v for k, v in check.items() if k != "ok"}),
+                   sp=data.get("sp"), e2e_sc=data.get("e2e_sc"), seconds=data.get("seconds", 0.0),
+                   files=list(data.get("files") or []), seconds_total=data.get("seconds_total"))
+
+
 OUTPUT_FILES = ("description.txt", "elements.json", "scenario.scenic", "preview.webm", "report.json")
 """Files :func:`generate_to_folder` may write; the report's ``files`` lists those it did write."""
 
@@ -132,7 +210,7 @@ def _write(folder: Path, name: str, text: str) -> None:
 
 def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
                        llm_config: LLMConfigLike = None, labels: Optional[Dict[str, Any]] = None,
-                       seconds: float = 10.0, started: Optional[float] = None) -> Dict[str, Any]:
+                       seconds: float = 10.0, started: Optional[float] = None) -> ConversionReport:
     """SG + validation for a description; writes the folder's files (:data:`OUTPUT_FILES`) and returns the report.
     ``started``: the :func:`time.perf_counter` at which the whole conversion began (the report's ``seconds_total``
     counts from it; ``None``: no such field).
@@ -149,52 +227,52 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
 
 
 def _generate_in(stage: Path, description: Description, *, sg: str, seed: int, llm_config: LLMConfigLike,
-                 labels: Optional[Dict[str, Any]], seconds: float, started: Optional[float]) -> Dict[str, Any]:
+                 labels: Optional[Dict[str, Any]], seconds: float, started: Optional[float]) -> ConversionReport:
     """:func:`generate_to_folder`'s work, its files written in ``stage``."""
     start = time.perf_counter()
-    report: Dict[str, Any] = {"description": description.as_dict()}
+    results: Dict[str, Any] = {}
     try:
         generation: Optional[Generation] = generate(description.text, backend=sg, seed=seed, llm_config=llm_config)
     except Exception as error:
-        report["generation"] = {"error": f"{type(error).__name__}: {error}", "category": classify_failure(error)}
+        results.update(generation_error=f"{type(error).__name__}: {error}",
+                       generation_error_category=classify_failure(error))
         generation = None
     if generation is not None:
         _write(stage, "scenario.scenic", generation.script)
         check = check_scenario(generation.script, seed=seed, seconds=seconds, preview=stage / "preview.webm")
         if check.ran:
             generation.note_simulated(check.simulated_elements)
-        report["generation"] = generation.as_dict()
-        report["check"] = {**asdict(check), "ok": check.ok}
+        results.update(generation=generation, check=check)
         if check.ran:
-            report["sp"] = semantic_preservation(description.elements, check.simulated_elements)
+            results["sp"] = semantic_preservation(description.elements, check.simulated_elements)
             if labels is not None:
-                report["e2e_sc"] = e2e_sc(labels, check.simulated_elements)
-    report["seconds"] = round(time.perf_counter() - start, 3)
-    report["files"] = [name for name in OUTPUT_FILES if name == "report.json" or (stage / name).is_file()]
-    if started is not None:
-        report["seconds_total"] = round(time.perf_counter() - started, 3)
-    _write(stage, "report.json", json.dumps(report, indent=2, default=str) + "\n")
+                results["e2e_sc"] = e2e_sc(labels, check.simulated_elements)
+    report = ConversionReport(
+        description=description, **results, seconds=round(time.perf_counter() - start, 3),
+        files=[name for name in OUTPUT_FILES if name == "report.json" or (stage / name).is_file()],
+        seconds_total=None if started is None else round(time.perf_counter() - started, 3))
+    _write(stage, "report.json", json.dumps(report.to_json(), indent=2, default=str) + "\n")
     return report
 
 
-def checks_passed(report: Mapping[str, Any]) -> bool:
+def checks_passed(report: ConversionReport) -> bool:
     """Whether a conversion's script passed its checks (safe, compiled, sampled, ran): what ``dv2s convert``'s
     exit status says."""
-    return bool(report.get("check", {}).get("ok"))
+    return report.check is not None and report.check.ok
 
 
-def placed_nothing(report: Mapping[str, Any]) -> bool:
+def placed_nothing(report: ConversionReport) -> bool:
     """Whether neither the description's elements nor the generated script hold anything but the ego: every
     phrase was left out (a partial description, with warnings, still counts as generated)."""
-    described = report.get("description", {}).get("elements") or {}
-    intended = report.get("generation", {}).get("intended_elements") or {}
-    if "error" in report.get("generation", {}) or not intended:
+    described = report.description.elements or {}
+    intended = (report.generation.intended_elements if report.generation is not None else None) or {}
+    if report.generation_error is not None or not intended:
         return False
     return (not any(described.get(key) for key in ("road", "participants", "actions", "relations"))
             and set(intended.get("participants") or []) <= {"ego"} and not intended.get("actions"))
 
 
-def generated(report: Mapping[str, Any]) -> bool:
+def generated(report: ConversionReport) -> bool:
     """Whether a generation from a description succeeded (what ``dv2s generate``'s exit status says): its script
     passed its checks and something of the description was placed (:func:`placed_nothing`)."""
     return checks_passed(report) and not placed_nothing(report)
@@ -224,7 +302,7 @@ class ConvertSettings:
 
 
 def convert_video(video: str | os.PathLike, out: str | os.PathLike,
-                  settings: Optional[ConvertSettings] = None) -> Dict[str, Any]:
+                  settings: Optional[ConvertSettings] = None) -> ConversionReport:
     """The whole pipeline for one video (with ``settings``, default :class:`ConvertSettings`); returns the report
     written to ``out/report.json``."""
     start = time.perf_counter()
@@ -245,15 +323,15 @@ def conversion_provenance(dra: str, sg: str, generation: Generation, description
 
 
 def add_converted(bank_dir: Optional[str | os.PathLike], video: str | os.PathLike, out: str | os.PathLike,
-                  report: Mapping[str, Any], *, seed: int, dra: str, sg: str) -> str:
+                  report: ConversionReport, *, seed: int, dra: str, sg: str) -> str:
     """Add the scenario a conversion wrote to ``out`` to the bank in ``bank_dir`` (the shipped bank, read-only, when
     None) with ``generated`` provenance; returns the entry's name, or a note saying why a conversion whose checks
     failed was not added."""
-    if not report.get("check", {}).get("ok"):
+    if not checks_passed(report) or report.generation is None:
         return f"(not added: {video} failed validation)"
-    description = Description.from_dict(report["description"])
+    description = report.description
     provenance = Provenance(kind="generated", video=str(video), seed=seed,
-                            **conversion_provenance(dra, sg, Generation.from_dict(report["generation"]), description))
+                            **conversion_provenance(dra, sg, report.generation, description))
     script = (Path(out) / "scenario.scenic").read_text(encoding="utf-8")
     entry = Bank(bank_dir).add(script, Sidecar(description=description.text, elements=description.elements,
                                                tags=("generated",), source=provenance))
