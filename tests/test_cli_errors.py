@@ -104,6 +104,15 @@ def test_convert_takes_bank_before_the_subcommand_too():
     assert args.bank == "C"
 
 
+def test_convert_refuses_a_bank_it_would_not_add_to(tmp_path, capsys):
+    video = tmp_path / "v.webm"
+    video.write_bytes(b"not read: the options are refused first")
+    code, _, err = run(capsys, "convert", video, "--bank", tmp_path / "bank", "--out", tmp_path / "out")
+    assert code == 2 and err.count("\n") == 1
+    assert "nothing is added without --add-to-bank, so it would be ignored: add --add-to-bank, or drop --bank" in err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "bank").exists()
+
+
 def _command(name, reads_bank):
     """A command group as docs/cli.md describes one: ``dv2s NAME`` prints the names of the bank it reads, which it
     declares (``bank_option``) and opens with ``open_bank`` when ``reads_bank``, else opens with ``Bank()``."""

@@ -54,7 +54,8 @@ def add_parser(subparsers) -> None:
     video_options(p)
     sg_option(p)
     p.add_argument("--out", default="out/convert", type=output_folder, help="output folder (one subfolder per video in batch mode)")
-    p.add_argument("--add-to-bank", action="store_true", help="add validated scenarios to the bank with provenance")
+    p.add_argument("--add-to-bank", action="store_true", help="add validated scenarios to the bank with provenance "
+                                                               "(--bank names it)")
     bank_option(p)
     p.add_argument("--jobs", type=int, default=1, help="parallel processes in batch mode")
     p.add_argument("--seed", type=int, default=0)
@@ -126,6 +127,9 @@ def run_convert(args: argparse.Namespace) -> int:
     from dv2s_gym.pipeline.batch_convert import convert_videos, videos_to_convert
     from dv2s_gym.pipeline.convert import ConvertSettings, add_converted, checks_passed
 
+    if args.bank is not None and not args.add_to_bank:
+        raise UsageError(f"--bank {args.bank} names the bank converted scenarios are added to, and nothing is "
+                         "added without --add-to-bank, so it would be ignored: add --add-to-bank, or drop --bank")
     pairs = videos_to_convert(args.video, args.out)
     settings = ConvertSettings(dra=args.dra, sg=args.sg, camera=args.camera, question=args.question, seed=args.seed,
                                llm_config=llm_config(args), seconds=args.seconds)
