@@ -23,7 +23,7 @@ from scenario_bank import BANK_DIR
 
 pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("in_process_simulator")]
 
-pytest.importorskip("scenic")
+import scenic  # noqa: F401  (a core dependency: a broken install fails here)
 
 SEEDS = range(10)
 NEEDED = 9

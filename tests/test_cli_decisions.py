@@ -70,7 +70,8 @@ def test_a_story_check_names_an_unknown_scenario_or_ego_as_a_project_error():
 
 
 def test_a_resumed_run_keeps_its_recorded_settings_unless_told_otherwise(tmp_path):
-    training = pytest.importorskip("policies.training")
+    pytest.importorskip("torch")  # the rl extra
+    from policies import training
     recorded = training.TrainConfig.from_json({"out": str(tmp_path), "steps": 5000, "seed": 3, "n_envs": 1})
     (tmp_path / "run.json").write_text(json.dumps({"config": recorded.to_json()}))
     resumed = training.run_settings(str(tmp_path), {"steps": 9000, "seed": None}, resume=True)

@@ -30,7 +30,7 @@ from scenario_bank.maps import (  # noqa: E402
 )
 from scenario_bank.maps import build_maps  # noqa: E402
 
-scenic = pytest.importorskip("scenic")
+import scenic  # a core dependency: a broken install fails here
 from scenic.domains.driving.roads import ManeuverType, Network  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("in_process_simulator")

@@ -421,8 +421,7 @@ DRIVES = [  # map, start lane (index among candidates), speed, min lanes, min co
     [pytest.param(*d, id=f"{d[0].stem}-{d[1]}") for d in DRIVES],
 )
 def test_vehicle_drives_through_intersections(map_path, start, speed, min_lanes, min_connecting):
-    if not map_path.exists():
-        pytest.skip(f"{map_path.name} not generated")
+    assert map_path.exists(), f"{map_path.name} is a shipped map and is missing"
     conv = load_road_network(map_path)
     starts = [
         lane.uid
@@ -440,8 +439,7 @@ def test_vehicle_drives_through_intersections(map_path, start, speed, min_lanes,
 def test_vehicle_merges_from_onramp_with_a_lane_change():
     """Ramp -> junction -> acceleration lane -> LANE_LEFT into the main road."""
     path = BANK / "highway_onramp.xodr"
-    if not path.exists():
-        pytest.skip(f"{path.name} not generated")
+    assert path.exists(), f"{path.name} is a shipped map and is missing"
     conv = load_road_network(path)
     hw = conv.hw_network
     # the ramp: a one-lane ordinary road whose connecting lane ends in a wider edge

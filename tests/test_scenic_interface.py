@@ -26,7 +26,7 @@ import math
 import numpy as np
 import pytest
 
-pytest.importorskip("scenic")
+import scenic  # noqa: F401  (a core dependency: a broken install fails here)
 
 from envs.coordinates import scenic_to_hw_heading  # noqa: E402
 from envs.road_network import load_road_network  # noqa: E402

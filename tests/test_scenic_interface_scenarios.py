@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("scenic")
+import scenic  # noqa: F401  (a core dependency: a broken install fails here)
 
 from envs.errors import UnsupportedConstructError  # noqa: E402
 from scenic_sim_helpers import (  # noqa: E402

@@ -6,7 +6,6 @@ ahead of the ego and crosses its path; an oncoming vehicle crosses the path of a
 bare "road" is a straight road.
 """
 
-import json
 from pathlib import Path
 
 import pytest
@@ -113,17 +112,10 @@ def test_negation_and_nominal_forms_are_not_actions():
 
 
 def _bank_entries():
-    """(name, description, elements) of every bank scenario whose sidecar has both; flat or folder layout."""
-    out = []
-    for path in sorted(SCENARIOS.glob("*.json")) + sorted(SCENARIOS.glob("*/meta.json")):
-        try:
-            meta = json.loads(path.read_text())
-        except (OSError, ValueError):
-            continue
-        if meta.get("description") and meta.get("elements"):
-            name = path.stem if path.name != "meta.json" else path.parent.name
-            out.append((name, meta["description"], meta["elements"]))
-    return out
+    """(name, description, elements) of every shipped bank scenario, read through the bank: each has both."""
+    from scenario_bank.bank import Bank
+
+    return [(entry.name, entry.description, entry.elements) for entry in Bank(SCENARIOS)]
 
 
 def bank_recall_precision():
@@ -144,8 +136,7 @@ def bank_recall_precision():
 
 def test_bank_descriptions_recall_and_precision():
     entries = _bank_entries()
-    if len(entries) < 5:
-        pytest.skip(f"only {len(entries)} bank sidecars have elements yet")
+    assert len(entries) >= 32 and all(description and elements for _, description, elements in entries)
     recall, precision, rows = bank_recall_precision()
     misses = [r for r in rows if r[1] or r[2]]
     assert recall >= 0.9 and precision >= 0.9, (recall, precision, misses)
