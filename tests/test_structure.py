@@ -154,9 +154,10 @@ def _loader_uses(tree: ast.AST, processes: bool = True) -> tuple:
     return names, computed
 
 
-_MODULE_LOADERS = {("pkgutil", "resolve_name"): "name", ("runpy", "run_path"): "path", ("pickle", "loads"): "pickle",
-                   ("sys", "modules"): "table"}
+_MODULE_LOADERS = {("pkgutil", "resolve_name"): "name", ("pydoc", "locate"): "name", ("pkgutil", "get_loader"): "name",
+                   ("runpy", "run_path"): "path", ("pickle", "loads"): "pickle", ("sys", "modules"): "table"}
 """More ways to load (or reach) a module by name, each a module's attribute: ``pkgutil.resolve_name("pkg.mod:attr")``,
+``pydoc.locate("pkg.mod.attr")``, ``pkgutil.get_loader("pkg.mod")``,
 ``runpy.run_path("pkg/mod.py")``, ``pickle.loads(b"...")`` (its GLOBAL opcodes import the modules they name: a
 literal is read, anything else is data) and ``sys.modules["pkg.mod"]`` (or ``.get``), read as the module named."""
 
@@ -607,11 +608,14 @@ def test_the_graph_sees_a_module_reached_by_other_loaders(tmp_path, planted, loa
     'subprocess.run([sys.executable, "-m", "dv2s_gym." + name])',
     'subprocess.run([sys.executable, "-c", f"import {name}"])',
     'pkgutil.resolve_name(name)',
+    'pydoc.locate(name)',
+    '[getattr(pydoc.locate(n), a) for n, a in {"dv2s_gym.mining.miner": "mine"}.items()]',
+    'pkgutil.get_loader(name)',
     'runpy.run_path(name)',
     'sys.modules[name]',
 ])
 def test_a_computed_name_given_to_another_loader_is_refused(planted):
-    tree = ast.parse(f"import pkgutil, runpy, subprocess, sys\ndef f(name):\n    {planted}\n")
+    tree = ast.parse(f"import pkgutil, pydoc, runpy, subprocess, sys\ndef f(name):\n    {planted}\n")
     assert [line.partition(":")[0] for line in _loader_uses(tree)[1]] == ["3"]
 
 
