@@ -132,7 +132,7 @@ def parse_config(text: str) -> Config:
             feedback = value
         elif key in _TEXT_OPTIONS:
             options[key] = value
-        elif key in ("buckets", "warmup", "patience", "avoid"):
+        elif key in ("buckets", "warmup", "avoid"):
             options[key] = int(value)
         else:
             options[key] = float(value)
@@ -388,7 +388,7 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     parser.add_argument("--split-config", action="append", default=None, metavar="LABEL:KEY=VALUE,...",
                         help="a setting of the split sampler (repeatable): alpha, buckets, thres, chooser "
                              "(cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy), "
-                             "warmup, forget, patience, floor, capacity, avoid, feedback; default: its preset "
+                             "warmup, avoid, feedback; default: its preset "
                              "(dv2s mine --sampler split)")
     parser.add_argument("--throughput-sampler", default="random")
     parser.add_argument("--throughput-budget", type=int, default=None, help="default 600; --quick 40")

@@ -58,7 +58,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--sampler-options", default=None,
                    help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
                    "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
-                   "and warmup (0), and against scenarios that stop yielding: forget, patience, floor, capacity, avoid "
+                   "warmup (0) and avoid (81: redraws past parameter cells that already failed; 0: off) "
                    "(see dv2s_gym/mining/samplers.py)")
     p.add_argument("--feedback", choices=list(FEEDBACKS), default=None,
                    help="what adaptive samplers learn from: robustness (every failure), novelty (a failure in a "

@@ -41,11 +41,7 @@ thres 0, buckets 3, the last only used by bucketed parameter samplers), and ``ch
 (``cross-entropy``, ``ucb``, ``epsilon-greedy``), ``params`` (``halton``, ``random``, ``bandit``,
 ``cross-entropy``), ``warmup`` (tries of every scenario before the chooser draws, default 0), ``avoid``
 (redraws of a scenario's parameters past cells where it already failed, default 81; 0 turns the
-redraws off), and for a cross-entropy chooser that leaves scenarios which stop yielding
-(:mod:`dv2s_gym.mining.chooser`, all off by default): ``forget`` (fraction of the drawn scenario's
-probability moved to the others on each non-failure), ``patience`` (draws without a failure before a
-scenario is cut to ``floor`` of the uniform share, default 0.5) and ``capacity`` (draws per grid cell after
-which a scenario is cut on every non-failure).
+redraws off).
 """
 
 from __future__ import annotations
@@ -104,7 +100,7 @@ NOVELTY = "novelty-bandit"
 (:mod:`dv2s_gym.mining.novelty_sampler`)."""
 
 SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton", "alpha": 0.9, "thres": 0.0,
-                                  "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5, "capacity": 0.0, "avoid": 81}
+                                  "buckets": 3, "warmup": 0, "avoid": 81}
 """The settings of :data:`SPLIT` when no option is given."""
 
 
@@ -186,26 +182,11 @@ def _split_params(options: Dict[str, Any]) -> Dict[str, Any]:
     warmup = params["warmup"]
     if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
         raise MiningError(f"sampler option warmup must be a whole number >= 0, not {warmup!r}")
-    for key in ("patience", "avoid"):
-        value = params[key]
-        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-            raise MiningError(f"sampler option {key} must be a whole number >= 0 (0: off), not {value!r}")
-    patience = params["patience"]
-    forget, floor = float(params["forget"]), float(params["floor"])
-    capacity = float(params["capacity"])
-    if capacity < 0.0:
-        raise MiningError(f"sampler option capacity must be >= 0 (0: off), not {params['capacity']!r}")
-    if (forget or patience or capacity) and params["chooser"] != "cross-entropy":
-        raise MiningError(f"sampler options forget, patience and capacity need chooser cross-entropy, not "
-                          f"{params['chooser']!r}; drop them or use chooser=cross-entropy")
-    if not 0.0 <= forget < 1.0:
-        raise MiningError(f"sampler option forget must be in [0, 1) (0: no forgetting), not {params['forget']!r}")
-    if not 0.0 <= floor <= 1.0:
-        raise MiningError(f"sampler option floor must be in [0, 1] (a fraction of the uniform share), "
-                          f"not {params['floor']!r}")
+    avoid = params["avoid"]
+    if isinstance(avoid, bool) or not isinstance(avoid, int) or avoid < 0:
+        raise MiningError(f"sampler option avoid must be a whole number >= 0 (0: off), not {avoid!r}")
     params["alpha"], params["thres"], params["buckets"] = (float(params["alpha"]), float(params["thres"]),
                                                            int(params["buckets"]))
-    params["forget"], params["floor"], params["capacity"] = forget, floor, capacity
     return params
 
 
@@ -444,16 +425,13 @@ def _scenario_dimensions(space: Any, feature_space: Any) -> list:
 
 
 def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
-    from dv2s_gym.mining.chooser import LeaveSettings
     from dv2s_gym.mining.split_sampler import AdaptSettings, ScenarioSplitSampler
 
     dimensions = _scenario_dimensions(space, feature_space)
     return ScenarioSplitSampler(
         feature_space, dimensions, chooser=params["chooser"], params=params["params"],
         adapt=AdaptSettings(alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"]),
-        warmup=params["warmup"], avoid=params["avoid"],
-        leave=LeaveSettings(forget=params["forget"], patience=params["patience"], floor=params["floor"],
-                            capacity=params["capacity"]))
+        warmup=params["warmup"], avoid=params["avoid"])
 
 
 def _make_novelty(space: Any, feature_space: Any, params: Dict[str, float]):
@@ -470,7 +448,7 @@ _REGISTRY: Registry[SamplerRecord] = Registry("sampler", MiningError, {
     "bandit": SamplerRecord(_verifai("multiArmedBanditSamplerFor", True), _verifai_params("mab"),
                             ("alpha", "buckets", "thres"), adaptive=True),
     SPLIT: SamplerRecord(_make_split, _split_params, ("alpha", "buckets", "thres", "chooser", "params", "warmup",
-                                                      "forget", "patience", "floor", "capacity", "avoid"),
+                                                      "avoid"),
                          default_feedback="novelty", adaptive=True),
     NOVELTY: SamplerRecord(_make_novelty, _novelty_params, ("explore", "prior_new", "prior_old"),
                            default_feedback="state-novelty", adaptive=True),

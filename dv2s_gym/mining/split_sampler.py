@@ -28,12 +28,10 @@ Every outcome is fed to the chooser and to the drawn scenario's parameter sample
 points of the same feature space as the other samplers (unused coordinates of ``u`` are
 0.5), so the miner, its records and its checkpoints treat this sampler like any other.
 
-Two extensions (options): ``avoid`` keeps drawing a scenario's parameter sampler (up to ``avoid`` more
+One extension (an option): ``avoid`` keeps drawing a scenario's parameter sampler (up to ``avoid`` more
 points) while its point falls in a cell of the cluster grid (:mod:`dv2s_gym.mining.cluster`) where that
 scenario already failed (under novelty feedback: where a cluster was found), so the Halton sequence is
-spent on cells not yet failing; ``forget``/``patience``/``capacity`` replace VerifAI's chooser by
-:class:`~dv2s_gym.mining.chooser.ForgetfulCrossEntropySampler`, which moves probability away from scenarios
-that stop yielding failures.
+spent on cells not yet failing.
 
 ``dv2s mine --sampler split`` uses the cross-entropy chooser (alpha 0.9), Halton parameters, ``avoid=81``
 and ``novelty`` feedback (settings chosen on tuning seeds 7-14; bench/RESULTS.md). ``avoid=0`` turns the
@@ -43,13 +41,12 @@ redraws off, the earlier preset (2.56x the distinct failure clusters of random s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import Any, List, Sequence, Tuple
 
 import numpy as np
 from verifai.samplers.feature_sampler import FeatureSampler, default_sampler_params
 
-from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler, LeaveSettings
-from dv2s_gym.mining.cluster import REGION_BINS, region_of
+from dv2s_gym.mining.cluster import region_of
 from verifai.features import Box, DiscreteBox
 from verifai.samplers.multi_armed_bandit import ContinuousMultiArmedBanditSampler
 from verifai.samplers.cross_entropy import ContinuousCrossEntropySampler, DiscreteCrossEntropySampler
@@ -86,14 +83,9 @@ class AdaptSettings:
     """Per parameter, for the ``bandit`` and ``cross-entropy`` parameter samplers."""
 
 
-def _make_chooser(kind: str, count: int, adapt: AdaptSettings, leave: LeaveSettings,
-                  cells: Optional[Sequence[int]] = None):
+def _make_chooser(kind: str, count: int, adapt: AdaptSettings):
     alpha, thres = adapt.alpha, adapt.thres
     if kind == "cross-entropy":
-        if leave.active:
-            return ForgetfulCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres,
-                                                leave=leave, cells=cells)
-
         return DiscreteCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres)
     if kind == "epsilon-greedy":
         return ContinuousEpsilonGreedySampler(domain=Box([0.0, 1.0]), alpha=alpha, thres=thres, buckets=count)
@@ -129,24 +121,19 @@ class ScenarioSplitSampler(FeatureSampler):
         avoid: up to this many further points of the scenario's parameter sampler are drawn while the point
             falls in a cell of the cluster grid where a failure (``rho < thres``; under novelty feedback a new
             cluster) was already found in that scenario; 0: the sampler's first point.
-        leave: how the ``cross-entropy`` chooser leaves scenarios that stop yielding failures
-            (:class:`~dv2s_gym.mining.chooser.LeaveSettings`); all off: VerifAI's ``DiscreteCrossEntropySampler``
-            as it is.
 
     Build it with the generators seeded (the Halton starts are drawn here); then draw with
     ``getSample`` and feed with ``update`` like any VerifAI feature sampler.
     """
 
     def __init__(self, space, dimensions: Sequence[int], chooser: str = "cross-entropy", params: str = "halton",
-                 adapt: AdaptSettings = AdaptSettings(), warmup: int = 0, leave: LeaveSettings = LeaveSettings(),
-                 avoid: int = 0) -> None:
+                 adapt: AdaptSettings = AdaptSettings(), warmup: int = 0, avoid: int = 0) -> None:
         super().__init__(space)
         self.width = max([int(d) for d in dimensions] + [1])
         """Coordinates of ``u`` in the feature space (the largest parameter count)."""
         self.dimensions = [int(d) for d in dimensions]
         self.chooser_kind, self.params_kind = chooser, params
-        cells = [REGION_BINS ** d for d in self.dimensions]  # the cluster grid's cells of each scenario
-        self.chooser = _make_chooser(chooser, len(self.dimensions), adapt, leave, cells)
+        self.chooser = _make_chooser(chooser, len(self.dimensions), adapt)
         self.param_samplers = [_make_params(params, d, adapt.alpha, adapt.thres, adapt.buckets)
                                for d in self.dimensions]
         self.draws = [0] * len(self.dimensions)
