@@ -54,7 +54,7 @@ from scenario_bank.scenic2 import upgrade_scenic2
 from scenario_bank.errors import MissingFileError, SettingError
 from envs.rendering import DV2SViewer
 
-__all__ = ["DV2SEnv", "ScenarioRef", "check_env_config"]
+__all__ = ["DV2SEnv", "ScenarioRef", "check_env_config", "resolve_scenarios"]
 
 if getattr(sys.excepthook, "__module__", "") == "scenic.core.errors":
     # Scenic replaces Python's default excepthook on import (only the default one); a user's own tracebacks

@@ -16,8 +16,7 @@ __all__ = [
     "StepTimeoutError",
     "Interrupted",
     "OBSERVATION_TYPES",
-    "ACTION_TYPES",
-]
+    "ACTION_TYPES", "ForeignConstructWarning", "SimulatorPropertiesError", "UntrustedScenarioError"]
 
 
 class Interrupted(KeyboardInterrupt):

@@ -32,7 +32,7 @@ from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.errors import MissingFileError
 
-__all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error", "step_timeout_error"]
+__all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error", "step_timeout_error", "read_scenario_file"]
 
 MODEL = "envs.scenic_highway.model"
 """The Scenic world model every scenario is compiled against."""

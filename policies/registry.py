@@ -63,8 +63,7 @@ __all__ = [
     "BUILTIN_POLICIES",
     "spec_from_file",
     "check_policy_spec",
-    "check_card_observation",
-]
+    "check_card_observation", "SB3_ALGORITHMS", "read_model_card"]
 
 SHIPPED_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "dv2s_ppo" / "model.zip"
 """The PPO checkpoint shipped with the package (``dv2s-ppo``)."""

@@ -101,8 +101,7 @@ __all__ = [
     "resolve_checkpoint",
     "fine_tune",
     "fine_tune_scenarios",
-    "with_reward_weights",
-]
+    "with_reward_weights", "check_source_observation"]
 
 ALGORITHMS = ("ppo", "dqn", "sac")
 SAMPLERS = ("uniform", "weighted", "curriculum")

@@ -62,12 +62,12 @@ from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.dedup import (NEAR_COPY_LINES, changed_code_lines, content_hash, find_duplicate, find_near_copy,
                                  find_near_duplicate, near_duplicate, param_ranges, semantic_key)
 from scenario_bank.families import near_duplicates_of
-from scenario_bank.entries import (BANK_VERSION, CONTROL_FIX, ENTRY_FILE_KEYS, ENTRY_FILES, MAX_FILE_BYTES,
+from scenario_bank.entries import (BANK_VERSION, ENTRY_FILE_KEYS, ENTRY_FILES, MAX_FILE_BYTES,
                                    MAX_JSON_DEPTH, MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, MINED_PROVENANCE_FIELDS, NEW_ENTRY_NAME, SCRIPT, SIDECAR, SIDECAR_VERSION,
-                                   SOURCE_KINDS, PathLike, ScenarioEntry, control_character_field, entry_bytes,
+                                   SOURCE_KINDS, PathLike, ScenarioEntry, entry_bytes,
                                    entry_file_name, entry_files, entry_matches, new_sidecar, read_json, scan_entries,
                                    unsafe_input)
-from scenario_bank.records import Provenance, Sidecar
+from scenario_bank.records import CONTROL_FIX, Provenance, Sidecar, control_character_field
 from scenario_bank.errors import (BankError, BankOptionError, BankVersionError, DuplicateScenarioError, NotABankError,
                                   NearDuplicateWarning,
                                   ScenarioRejectedError, UnknownScenarioError, UnsafeBankInputError, WrongTypeError,
@@ -113,8 +113,7 @@ __all__ = [
     "entry_files",
     "entry_file_name",
     "ON_DUPLICATE",
-    "verify",
-]
+    "verify", "MAX_JSON_DEPTH"]
 
 INDEX = "index.json"
 WRITERS_LOCK = ".dv2s-writers.lock"

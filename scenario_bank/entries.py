@@ -30,7 +30,8 @@ __all__ = [
     "BANK_VERSION", "SIDECAR_VERSION", "SOURCE_KINDS", "SCRIPT", "SIDECAR", "MAX_SCRIPT_BYTES", "MAX_SIDECAR_BYTES",
     "MAX_FILE_BYTES", "MAX_JSON_DEPTH", "MINED_PROVENANCE_FIELDS", "ENTRY_FILE_KEYS", "ENTRY_FILES", "entry_files",
     "entry_file_name", "ScenarioEntry", "Listing", "validate_sidecar", "new_sidecar", "new_provenance", "scan_entries",
-    "entry_matches", "Provenance", "Sidecar",
+    "entry_matches", "Provenance", "Sidecar", "NEW_ENTRY_NAME", "PathLike", "entry_bytes", "read_json", "read_text",
+    "unsafe_input",
 ]
 
 BANK_VERSION = 1

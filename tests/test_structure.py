@@ -1880,6 +1880,65 @@ def _module_gaps(tree: ast.Module) -> List[str]:
     return gaps + (["__all__"] if _declared_all(tree) is None else [])
 
 
+def _literal_all(tree: ast.Module) -> bool:
+    """Whether the module's ``__all__`` is written out (a list or tuple of strings), not computed."""
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
+            return isinstance(node.value, (ast.List, ast.Tuple)) and all(
+                isinstance(elt, ast.Constant) and isinstance(elt.value, str) for elt in node.value.elts)
+    return True
+
+
+def names_imported_past_all(modules: Dict[str, Path]) -> Dict[str, List[str]]:
+    """``{module: names}``: the public names other project modules import from a module (``from m import name``,
+    relative too) that its ``__all__`` does not list; a submodule imported by name is no such name."""
+    declared = {module: _declared_all(tree) if _literal_all(tree) else None  # a lazy module's is computed
+                for module, tree in ((module, _parsed(path)) for module, path in modules.items())}
+    missing: Dict[str, set] = {}
+    for module, path in modules.items():
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        for node in ast.walk(_parsed(path)):
+            if not isinstance(node, ast.ImportFrom) or not node.module and not node.level:
+                continue
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")
+                base = ".".join(anchor[: len(anchor) - node.level + 1] + ([base] if base else []))
+            listed = declared.get(base)
+            if base not in modules or listed is None:
+                continue
+            for alias in node.names:
+                name = alias.name
+                if name != "*" and not name.startswith("_") and f"{base}.{name}" not in modules and name not in listed:
+                    missing.setdefault(base, set()).add(name)
+    return {module: sorted(names) for module, names in sorted(missing.items())}
+
+
+def test_what_another_module_imports_is_in_the_exporters_all():
+    """A name another module imports is API in fact: its module lists it in ``__all__`` (or the name is private,
+    ``_name``, and shared by an exemption of tests/test_private_names.py)."""
+    missing = names_imported_past_all(_modules())
+    assert not missing, f"names other modules import that the exporter's __all__ does not list: {missing}"
+
+
+def test_the_all_rule_sees_an_import_past_all_and_a_computed_all(tmp_path):
+    modules = _modules()
+    copy = tmp_path / "planted.py"
+    copy.write_text(modules["envs.trace"].read_text(encoding="utf-8")
+                    + "\n\nfrom scenario_bank.entries import BANK_VERSION as _V, scan_entries as _S\n"
+                    + "from policies.registry import load_policy\n", encoding="utf-8")
+    planted = {**modules, "envs.trace": copy}
+    entries = _parsed(modules["scenario_bank.entries"])
+    assert "BANK_VERSION" in _declared_all(entries)
+    assert names_imported_past_all(planted) == names_imported_past_all(modules)  # listed ones pass
+    exporter = tmp_path / "exporter.py"
+    exporter.write_text(modules["policies.registry"].read_text(encoding="utf-8").replace('    "load_policy",\n', ""),
+                        encoding="utf-8")
+    assert "load_policy" in names_imported_past_all({**planted, "policies.registry": exporter})["policies.registry"]
+    assert not _literal_all(ast.parse('__all__ = sorted(set())\n'))
+    assert _literal_all(ast.parse('__all__ = ["a", "b"]\n')) and _literal_all(ast.parse("x = 1\n"))
+
+
 def test_the_public_api_check_sees_a_missing_or_wrong_all_or_docstring():
     assert _declared_all(ast.parse("def f():\n    pass\n")) is None
     assert _declared_all(ast.parse('__all__ = ["f", "g"]\ndef f():\n    pass\n')) == ["f", "g"]
@@ -1893,7 +1952,7 @@ def test_every_module_names_its_public_api():
     """Every module, a package's ``__init__`` too, says what it is in its docstring and which names are its API
     in ``__all__`` (an empty list when it exports none), and every name there exists (a star import or the API
     docs never meet a missing one)."""
-    missing, undocumented, dangling = [], [], {}
+    missing, undocumented, dangling, computed = [], [], {}, []
     for package in PACKAGES:
         for path in sorted((ROOT / package).rglob("*.py")):
             tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
@@ -1907,12 +1966,15 @@ def test_every_module_names_its_public_api():
             defined = {n for node in ast.walk(tree) for n in _bound_names(node)}
             if "__getattr__" in defined:  # names loaded lazily on first access are checked by importing them
                 continue
+            if not _literal_all(tree):
+                computed.append(str(path.relative_to(ROOT)))
             absent = sorted(set(declared) - defined)
             if absent:
                 dangling[str(path.relative_to(ROOT))] = absent
     assert not missing, f"modules without __all__: {missing}"
     assert not undocumented, f"modules without a docstring: {undocumented}"
     assert not dangling, f"names in __all__ the module does not define or import: {dangling}"
+    assert not computed, f"modules whose __all__ is computed, not written out (only lazy modules may): {computed}"
 
 
 def _bound_names(node: ast.AST) -> List[str]:

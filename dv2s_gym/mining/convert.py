@@ -113,7 +113,7 @@ when the endpoint works, rather than rejecting every cluster."""
 
 __all__ = ["convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_passed", "reference_outcome",
            "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
-           "ENTRY_TRACE", "ENTRY_CONVERTED_VIDEO", "clip_episode"]
+           "ENTRY_TRACE", "ENTRY_CONVERTED_VIDEO", "clip_episode", "SETUP_ERRORS"]
 
 CONVERSION_DIR = "conversion"
 ENTRY_VIDEO = "failure.webm"

@@ -24,7 +24,7 @@ from pathlib import Path
 from tqdm import tqdm
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
-__all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary", "episode_failed"]
+__all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary", "episode_failed", "failure_types"]
 
 import numpy as np
 from dv2s_gym.mining.jsonl import read_rows

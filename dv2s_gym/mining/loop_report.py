@@ -115,7 +115,7 @@ from scenario_bank.entries import SIDECAR, read_json
 from typing import Any, Dict, List, Mapping, Optional
 
 __all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start",
-           "with_cross_round_checks", "FINAL_VS_START_DIR"]
+           "with_cross_round_checks", "FINAL_VS_START_DIR", "errored_note", "errored_text", "reference_gate_text"]
 
 FINAL_VS_START_DIR = "final_vs_start"
 """Folder (in the loop folder) of the final-vs-starting-policy paired regression report."""

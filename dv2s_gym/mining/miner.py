@@ -81,7 +81,7 @@ from dv2s_gym.regress.identity import RESUME_FINGERPRINT, check_policy_unchanged
 from policies.registry import load_policy
 
 __all__ = ["MineRun", "MineSettings", "RunOrigin", "WorkerSettings", "FEEDBACKS", "mine", "read_records",
-           "episode_seed", "SETTINGS_VERSION"]
+           "episode_seed", "SETTINGS_VERSION", "progress_bar"]
 
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16

@@ -9,7 +9,7 @@ from scenario_bank.failure_types import severity_order, type_label
 
 __all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
            "NOT_COMPARED_REASONS", "not_compared_reason", "not_compared_counts", "not_compared_text",
-           "not_compared_names_text", "parameter_check_text", "clip_caption"]
+           "not_compared_names_text", "parameter_check_text", "clip_caption", "by_type_text"]
 
 NOT_COMPARED_REASONS: Tuple[Tuple[str, Tuple[str, ...], str], ...] = (
     ("no_counterpart", ("defines no numeric parameter of that name", "sets the same quantity of that object"),

@@ -59,7 +59,7 @@ from scenario_bank.named_registry import Registry
 
 __all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "NOVELTY",
            "SceneSampler", "SamplerRecord", "default_feedback", "make_sampler", "sampler_params", "is_adaptive",
-           "is_uniform", "register_sampler", "registered_samplers"]
+           "is_uniform", "register_sampler", "registered_samplers", "UNSEALED"]
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.stages import describe, generate
 from scenario_bank.errors import MissingFileError, SettingError
 
-__all__ = ["EvalItem", "EVALSET_DIR", "collect_items", "evaluate", "format_results"]
+__all__ = ["EvalItem", "EVALSET_DIR", "collect_items", "evaluate", "format_results", "VIDEO_SUFFIXES"]
 
 VIDEO_SUFFIXES = (".mp4", ".webm", ".avi", ".mkv", ".gif")
 EVALSET_DIR = Path(__file__).resolve().parents[1] / "evalset"

@@ -119,8 +119,7 @@ __all__ = [
     "check_baseline_report",
     "write_json",
     "write_markdown",
-    "format_summary",
-]
+    "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings"]
 
 SCHEMA = "dv2s-regress"
 SCHEMA_VERSION = 1

@@ -29,8 +29,7 @@ __all__ = [
     "NoCarlaActor",
     "WalkTowardsAction",
     "RegulatedControlAction",
-    "install_driving_behavior_support",
-]
+    "install_driving_behavior_support", "MissingMapError"]
 
 
 class MissingMapError(DV2SError, ValueError):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import threading
 
-__all__ = ["OutputTail"]
+__all__ = ["OutputTail", "printable"]
 
 
 class OutputTail:
