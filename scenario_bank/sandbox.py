@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -262,6 +263,17 @@ def _cache_key(script: str, limits: SandboxLimits, request: Dict[str, Any]) -> s
     return hashlib.sha256(payload.encode()).hexdigest()
 
 
+_JAIL_SCRATCH = "/tmp/scenarios"
+"""Where the jailed worker writes the scripts it runs (``envs.jail_worker.SCRATCH``): a path the user never saw."""
+
+
+def _outside_names(message: str, name: str) -> str:
+    """``message`` with the jail's copy of the script named as the caller named it (``name``), and the files
+    beside it by their names alone."""
+    message = re.sub(re.escape(_JAIL_SCRATCH) + r"/\d+/[^/\s,:]+\.scenic", lambda _: name, message)
+    return re.sub(re.escape(_JAIL_SCRATCH) + r"/\d+/", "", message)
+
+
 def verify_script(
     script: str,
     *,
@@ -288,7 +300,7 @@ def verify_script(
     result = run_in_sandbox(script, name=name, limits=limits, seeds=seeds, run_seconds=run_seconds,
                             max_sample_iterations=max_sample_iterations)
     if not result.ok:
-        raise SandboxError(f"{name} failed its sandboxed check: {result.message}", result)
+        raise SandboxError(f"{name} failed its sandboxed check: {_outside_names(result.message, name)}", result)
     if record is not None:
         try:
             record.parent.mkdir(parents=True, exist_ok=True)

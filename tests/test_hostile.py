@@ -170,6 +170,7 @@ def test_a_script_that_fails_to_compile_is_a_clear_sandbox_error():
     with pytest.raises(SandboxError, match="while compiling.*UndefinedThing") as caught:
         verify_script(text, name="broken", limits=TEST_LIMITS)
     assert caught.value.stage == "compile" and caught.value.limit is None
+    assert "/tmp/scenarios" not in str(caught.value)  # the jail's copy is named as the caller named the script
 
 
 def test_path_methods_on_the_map_are_refused_and_a_local_map_still_compiles(tmp_path):
