@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, List, Mapping, Optional, Tuple
 
-from dv2s_gym.pipeline.semantics.trace import elements_from_trace, trace_actor_kind
+from dv2s_gym.pipeline.semantics.trace import ego_frame, elements_from_trace, trace_actor_kind
 from scenario_bank.failure_types import failure_type
 from scenario_bank.elements import ActorKind
 from scenario_bank.records import JsonRecord
@@ -46,12 +46,6 @@ _LANE_CHANGES = {"lane_change_left", "lane_change_right"}
 
 def _frequency(trace) -> float:
     return float((trace.config or {}).get("policy_frequency") or 5)
-
-
-def _ego_frame(ego, other):
-    dx, dy = other[0] - ego[0], other[1] - ego[1]
-    c, s = math.cos(ego[2]), math.sin(ego[2])
-    return dx * c + dy * s, dx * s - dy * c
 
 
 def _failure_step(trace, failure: Mapping[str, Any]) -> int:
@@ -86,7 +80,7 @@ def key_actor(trace, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
         for name in names:
             if name not in step:
                 continue
-            lon, left = _ego_frame(ego, step[name])
+            lon, left = ego_frame(ego, step[name])
             near[name] = min(near.get(name, math.inf), math.hypot(lon, left))
             if lon > 0 and abs(left) <= _SAME_LANE_M:
                 ahead[name] = min(ahead.get(name, math.inf), lon)
@@ -165,7 +159,7 @@ def _first_seen(trace, name: str, k: int) -> Optional[Tuple[float, str]]:
     (side: ``"same_lane"``, ``"left"``, ``"right"``); ``None`` when it is not seen there."""
     for step in _lookback(trace, k):
         if "ego" in step and name in step:
-            lon, left = _ego_frame(step["ego"], step[name])
+            lon, left = ego_frame(step["ego"], step[name])
             return lon, "same_lane" if abs(left) <= _SAME_LANE_M else ("left" if left > 0 else "right")
     return None
 

@@ -79,7 +79,8 @@ from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.loop_record import (
     FineTuneArm, HeldOutBefore, HeldOutComparison, MinedEntry, MiningSummary, ReferenceGate, RegressComparison,
     RegressSummary, RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
-from dv2s_gym.mining.loop_report import errored_note, errored_text, reference_gate_text, write_loop_reports
+from dv2s_gym.mining.loop_report import (errored_note, errored_text, rate_text, reference_gate_text,
+                                         write_loop_reports)
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
 from dv2s_gym.mining.loop_verdict import (
     EVIDENCE_FLOOR, evidence_floor_note, HELDOUT_ALPHA, heldout_worse, Recommendation, recommendation)
@@ -1235,15 +1236,10 @@ def _with_parents(kept: Sequence[MinedEntry], bank: Optional[str]) -> List[Mined
 def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> None:
     after = steps.after
 
-    def rate(r: Optional[Mapping[str, Any]]) -> str:
-        if not r or r.get("rate") is None:
-            return "-"
-        return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['low']:.2f}, {r['high']:.2f}]"
-
     if after:
-        line = (f"round {number}: held-out failure rate start {rate(after.before)}, "
-                + (f"control {rate(after.control)}, " if after.control else "")
-                + f"fine-tuned {rate(after.after)}")
+        line = (f"round {number}: held-out failure rate start {rate_text(after.before)}, "
+                + (f"control {rate_text(after.control)}, " if after.control else "")
+                + f"fine-tuned {rate_text(after.after)}")
         if after.underpowered:
             log(line + f"; NO DROP OR TEST REPORTED: {after.underpowered}")
         else:

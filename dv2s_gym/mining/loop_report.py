@@ -114,14 +114,15 @@ from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.entries import SIDECAR, read_json
 from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start",
+__all__ = ["rate_text", "write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start",
            "with_cross_round_checks", "FINAL_VS_START_DIR", "errored_note", "errored_text", "reference_gate_text"]
 
 FINAL_VS_START_DIR = "final_vs_start"
 """Folder (in the loop folder) of the final-vs-starting-policy paired regression report."""
 
 
-def _rate(r: Optional[Mapping[str, Any]]) -> str:
+def rate_text(r: Optional[Mapping[str, Any]]) -> str:
+    """A held-out failure rate ``{"k", "n", "rate", "low", "high"}`` as ``k/n = rate [low, high]`` (``-``: none)."""
     if not r or r.get("rate") is None:
         return "-"
     return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['low']:.2f}, {r['high']:.2f}]"
@@ -280,14 +281,14 @@ def _round_row(record: RoundRecord) -> Dict[str, Any]:
     p_value = after.mcnemar_p
     p_control = None if after.vs_control is None else after.vs_control.mcnemar_p
     return {
-        "control": _rate(after.control) if after.control else "-",
+        "control": rate_text(after.control) if after.control else "-",
         "p_control": "-" if p_control is None else f"{p_control:.3g}",
         "untouched": _untouched_cell(steps.untouched),
         "round": record.round, "failures": _recorded(mine, "failures"),
         "against": _recorded(mine, "failures_against_policy"), "episodes": _recorded(mine, "episodes"),
         "clusters": _recorded(mine, "clusters"), "kept": len({e.scenario for e in (mine.kept_entries if mine is not None else ())}),
         "split": f"{len(split.fine_tune_scenarios)} / {len(split.held_out_scenarios)}",
-        "before": _rate(after.before), "after": _rate(after.after), "drop": drop_text,
+        "before": rate_text(after.before), "after": rate_text(after.after), "drop": drop_text,
         "p": "-" if p_value is None else f"{p_value:.3g}",
         "verdict": regress.verdict or steps.skipped or "-",
     }
@@ -483,9 +484,9 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
         return lines + [f"- held-out episodes: none ran ({after.get('errors', 0)} with errors)"]
     table = after.get("table", {})
     lines.append(f"- held-out episodes: {after.get('pairs')} pairs{_sources_text(after)} ({after.get('errors')} with "
-                 f"errors left out); start {_rate(after.get('before'))}"
-                 + (f", control {_rate(after.get('control'))}" if after.get("control") else "")
-                 + f", fine-tuned {_rate(after.get('after'))}; paired fine-tuned vs start: both failed "
+                 f"errors left out); start {rate_text(after.get('before'))}"
+                 + (f", control {rate_text(after.get('control'))}" if after.get("control") else "")
+                 + f", fine-tuned {rate_text(after.get('after'))}; paired fine-tuned vs start: both failed "
                  f"{table.get('both_fail')}, only start {table.get('before_only')}, only fine-tuned "
                  f"{table.get('after_only')}, neither {table.get('neither')}"
                  + ("" if after.get("mcnemar_p") is None else f", exact two-sided McNemar p = {after['mcnemar_p']:.3g}"))

@@ -69,7 +69,7 @@ from shapely.affinity import scale
 from scenario_bank.elements import ActorKind, normalize_elements
 from scenario_bank.maps import MAPS_DIR
 
-__all__ = ["elements_from_trace", "collision_type", "trace_actor_kind", "map_view", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
+__all__ = ["ego_frame", "elements_from_trace", "collision_type", "trace_actor_kind", "map_view", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
 
 MAP_ROAD_TYPES = {
     "highway_straight": "highway",
@@ -144,7 +144,7 @@ def _heading_gap(a: float, b: float) -> float:
     return abs(float(_wrap(np.array([a - b]))[0]))
 
 
-def _ego_frame(ego: np.ndarray, other: np.ndarray) -> Tuple[float, float]:
+def ego_frame(ego: np.ndarray, other: np.ndarray) -> Tuple[float, float]:
     """(longitudinal, leftward) position of ``other`` relative to ``ego`` = [x, y, heading, speed]."""
     dx, dy = other[0] - ego[0], other[1] - ego[1]
     c, s = math.cos(ego[2]), math.sin(ego[2])
@@ -230,7 +230,7 @@ def _stays_in_lane(track: np.ndarray, view: Optional[_MapView], samples: int = 4
 
     Without a map: it stays within half a lane of the line it started on (straight roads)."""
     if view is None:
-        return all(abs(_ego_frame(track[0], row)[1]) <= LANE_HALF_WIDTH for row in track)
+        return all(abs(ego_frame(track[0], row)[1]) <= LANE_HALF_WIDTH for row in track)
     network = view.network
     previous = None
     for x, y, heading, _ in track[:: max(1, len(track) // samples)]:
@@ -254,7 +254,7 @@ def collision_type(a: Any, b: Any) -> str:
     degrees and ``collide_head_on`` when they differ by at least 135; every other contact is
     ``collide_side`` (angle, T-bone, sideswipe). Pedestrians and obstacles are judged by the same rule.
     """
-    lon, left = _ego_frame(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    lon, left = ego_frame(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
     frontal = abs(lon) / VEHICLE_LENGTH > abs(left) / VEHICLE_WIDTH
     gap = _heading_gap(float(a[2]), float(b[2]))
     if frontal and gap <= FRONTAL_GAP:
@@ -318,7 +318,7 @@ def elements_from_trace(trace) -> Dict[str, Any]:
     near: Dict[str, str] = {}
     for name, track in tracks.items():
         if name != "ego":
-            distances = [math.hypot(*_ego_frame(ego[min(i, len(ego) - 1)], track[i])) for i in range(len(track))]
+            distances = [math.hypot(*ego_frame(ego[min(i, len(ego) - 1)], track[i])) for i in range(len(track))]
             if min(distances) > NEAR:
                 continue  # background traffic that never came near the ego
         near[name] = _kind(name, kinds)
@@ -383,7 +383,7 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     windows = _drift_windows(_until_crash(track, crashed_at, dt), dt, view) if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} else []
     if windows:
         out.add("drift")
-        lateral = np.array([abs(_ego_frame(track[0], row)[1]) for row in track])
+        lateral = np.array([abs(ego_frame(track[0], row)[1]) for row in track])
         if "swerve" in out and _during(windows, float(np.argmax(lateral)) * dt, margin=0.0):
             out.discard("swerve")  # its widest excursion is the drift: a slow drift and back is no swerve
     if "u_turn" in out:
@@ -430,7 +430,7 @@ def _crashed_pulling_out(track: np.ndarray, crashed_at: float, dt: float) -> boo
     if len(before) < 2 or abs(before[0, 3]) >= STOP_SPEED:
         return False
     travelled = float(np.hypot(*np.diff(before[:, :2], axis=0).T).sum())
-    shift = max(abs(_ego_frame(before[0], row)[1]) for row in before)
+    shift = max(abs(ego_frame(before[0], row)[1]) for row in before)
     return travelled >= PULL_OUT_CRASH_M and shift >= PULL_OUT_CRASH_LATERAL_M
 
 
@@ -472,7 +472,7 @@ def _lateral_offsets(track: np.ndarray, view: Optional[_MapView]) -> np.ndarray:
 
     Without a map: the offset from the line it starts on (straight roads)."""
     if view is None:
-        return np.array([_ego_frame(track[0], row)[1] for row in track])
+        return np.array([ego_frame(track[0], row)[1] for row in track])
     network = view.network
     out = np.full(len(track), np.nan)
     lane = None
@@ -556,12 +556,12 @@ def _special_motions(track: np.ndarray, changes: List[Dict[str, Any]]) -> Set[st
         first = int(moving[0])
         after = track[first:]
         travelled = float(np.hypot(*np.diff(after[:, :2], axis=0).T).sum()) if len(after) > 1 else 0.0
-        shift = abs(_ego_frame(track[0], track[-1])[1])
+        shift = abs(ego_frame(track[0], track[-1])[1])
         if travelled >= PULL_OUT_MIN_M and shift >= PULL_OUT_LATERAL_M:
             out.add("pull_out")
             return out
     if not changes:
-        lateral = np.array([_ego_frame(track[0], row)[1] for row in track])
+        lateral = np.array([ego_frame(track[0], row)[1] for row in track])
         peak = int(np.argmax(np.abs(lateral)))
         if abs(lateral[peak]) >= SWERVE_MIN_M and abs(lateral[-1]) <= LANE_HALF_WIDTH / 2 and peak < len(track) - 1:
             out.add("swerve")
@@ -571,7 +571,7 @@ def _special_motions(track: np.ndarray, changes: List[Dict[str, Any]]) -> Set[st
 def _relations(ego: np.ndarray, track: np.ndarray) -> Set[str]:
     """Relations to the ego at the start of the episode (the set-up the scenario describes)."""
     out: Set[str] = set()
-    lon, left = _ego_frame(ego[0], track[0])
+    lon, left = ego_frame(ego[0], track[0])
     heading_gap = _heading_gap(track[0, 2], ego[0, 2])
     if heading_gap > math.radians(135) and track[:, 3].max() > 0.5:
         out.add("oncoming")
@@ -636,7 +636,7 @@ def _interactions(
     cut-in, overtake, merge or drift are judged), ``kind`` and ``changes`` belong to ``track``."""
     out: Set[str] = set()
     n = min(len(ego), len(track))
-    rel = np.array([_ego_frame(ego[i], track[i]) for i in range(n)])
+    rel = np.array([ego_frame(ego[i], track[i]) for i in range(n)])
     if kind == ActorKind.PEDESTRIAN:
         lateral_travel = abs(rel[-1, 1] - rel[0, 1]) if n else 0.0
         moved = float(np.hypot(*(track[-1, :2] - track[0, :2])))
