@@ -100,7 +100,7 @@ from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.bank import Bank, DuplicateScenarioError
 from scenario_bank.dedup import param_ranges
-from scenario_bank.errors import NearDuplicateWarning, WrongTypeError
+from scenario_bank.errors import BankError, NearDuplicateWarning, WrongTypeError
 from scenario_bank.records import Provenance, Sidecar
 from policies.evaluation import run_episode
 from policies.registry import load_policy
@@ -997,7 +997,7 @@ def _parent_script(record: Mapping[str, Any], bank_dir: Optional[PathLike]) -> O
     name only)."""
     try:
         return (Bank(bank_dir) if bank_dir else Bank()).get(record["scenario"]).script
-    except Exception:  # the comparison by meaning is an addition; without the parent, names only
+    except (BankError, OSError):  # the comparison by meaning is an addition; without the parent, names only
         return None
 
 

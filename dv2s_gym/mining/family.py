@@ -14,6 +14,7 @@ from functools import lru_cache
 from typing import Dict, Optional, Tuple
 
 from scenario_bank.bank import Bank
+from scenario_bank.errors import BankError
 from scenario_bank.families import content_families
 from scenario_bank.records import EpisodeRecord
 
@@ -53,7 +54,7 @@ def _families(bank_dir: Optional[str], stamp: Tuple[int, ...]) -> Optional[Dict[
     """:func:`scenario_bank.families.content_families` of a bank, computed once per state of the bank."""
     try:
         bank = Bank(bank_dir) if bank_dir else Bank()
-    except Exception:  # noqa: BLE001 - no readable bank: every scenario is its own family
+    except (BankError, OSError):  # no readable bank: every scenario is its own family
         return None
     return content_families(bank)
 

@@ -160,7 +160,7 @@ def _road_type(trace, ego_track: np.ndarray) -> Optional[str]:
         from envs.road_network import load_road_network
 
         converted = load_road_network(map_path)
-    except Exception:
+    except (ValueError, OSError):  # no map, or not one the converter reads: the road type stays unknown
         return None
     network = converted.hw_network
     through_junction = False
