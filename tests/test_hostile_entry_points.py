@@ -185,7 +185,7 @@ def test_an_llm_that_answers_with_a_hostile_script_gets_no_scenario(name, tmp_pa
                                    retriever=ExampleRetriever(bank_examples(), backend="tfidf"),
                                    max_sample_iterations=200, raise_on_failure=False)
     assert not result.ok and result.failures
-    failures = [f if isinstance(f, dict) else vars(f) for f in result.failures]
+    failures = [f.to_dict() for f in result.failures]
     assert all(f["stage"] in ("safety", "compile", "sample", "run") for f in failures), failures
     _no_canary(*(str(f.get("message")) for f in failures))
     assert not marker.exists()

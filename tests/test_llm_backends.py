@@ -371,8 +371,8 @@ def test_sg_repairs_undefined_symbol_on_attempt_2(examples, tfidf_retriever):
         result = generate_with_llm(DRA_TEXT, fast_client(server), retriever=tfidf_retriever, k=3, **FAST)
     assert result.ok and result.attempts == 2 and server.request_count == 2
     assert result.script == FIXED_SCRIPT
-    assert [(f["attempt"], f["category"], f["stage"]) for f in result.failures] == [(1, "undefined_symbol", "compile")]
-    assert "leadGap" in result.failures[0]["message"]
+    assert [(f.attempt, f.category, f.stage) for f in result.failures] == [(1, "undefined_symbol", "compile")]
+    assert "leadGap" in result.failures[0].message
     assert result.failure_counts() == {"undefined_symbol": 1}
     assert result.model == "gpt-4o-2024-08-06" and result.retrieval == "tfidf"
     # the first request: fixed context, k few-shot pairs, then the description
@@ -400,8 +400,8 @@ def test_sg_never_returns_an_unsafe_script(tfidf_retriever):
                                    raise_on_failure=False, **FAST)
     failed = caught.value.result
     assert failed.script is None and failed.attempts == 2
-    assert [f["category"] for f in failed.failures] == ["unsafe_code", "unsafe_code"]
-    assert "import os" in failed.failures[0]["message"]
+    assert [f.category for f in failed.failures] == ["unsafe_code", "unsafe_code"]
+    assert "import os" in failed.failures[0].message
     assert "unsafe_code: 2" in str(caught.value) and "2 attempt" in str(caught.value)
     assert result.script is None and result.failure_counts() == {"unsafe_code": 1}
 
@@ -411,7 +411,7 @@ def test_sg_unsafe_then_fixed_returns_only_the_safe_script(tfidf_retriever):
     with ChatServer(queue=["sg_unsafe_import_os.json", "sg_lead_brake_attempt2_fixed.json"]) as server:
         result = generate_with_llm(DRA_TEXT, fast_client(server), retriever=tfidf_retriever, **FAST)
     assert result.script == FIXED_SCRIPT and "import os" not in result.script
-    assert result.failures[0]["category"] == "unsafe_code" and result.attempts == 2
+    assert result.failures[0].category == "unsafe_code" and result.attempts == 2
     assert "unsafe_code" in last_user_text(server.requests[1])
 
 

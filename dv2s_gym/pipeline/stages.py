@@ -17,6 +17,7 @@ import os
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
+from dv2s_gym.pipeline.attempts import GenerationFailure
 from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
 from dv2s_gym.pipeline.llm_config import LLMConfigLike
 from scenario_bank.named_registry import Registry
@@ -53,7 +54,7 @@ class Generation:
     script: str
     backend: str
     warnings: List[str] = field(default_factory=list)
-    failures: List[Dict[str, Any]] = field(default_factory=list)
+    failures: List[GenerationFailure] = field(default_factory=list)
     attempts: int = 1
     model: Optional[str] = None
     context_hash: Optional[str] = None
@@ -63,7 +64,7 @@ class Generation:
         """Failures per category of the paper's taxonomy (plus unsafe code)."""
         counts: Dict[str, int] = {}
         for failure in self.failures:
-            counts[failure["category"]] = counts.get(failure["category"], 0) + 1
+            counts[failure.category] = counts.get(failure.category, 0) + 1
         return counts
 
     def note_simulated(self, simulated: Dict[str, Any]) -> List[str]:

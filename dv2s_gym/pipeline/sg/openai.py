@@ -37,6 +37,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from dv2s_gym.pipeline.attempts import GenerationFailure
 from dv2s_gym.pipeline.errors import GenerationFailedError
 from dv2s_gym.pipeline.prompts import prompt_hash, repair_message, sg_context, sg_messages
 from scenario_bank.safety import check_script, UnsafeScenarioError
@@ -370,12 +371,12 @@ class SGResult:
 
     ``script`` passed safety, compile, sampling and a short run (None only on a
     :class:`~dv2s_gym.pipeline.errors.GenerationFailedError`'s result).
-    ``failures`` has one ``{"attempt", "category", "stage", "message"}`` per failed attempt.
+    ``failures`` has one :class:`~dv2s_gym.pipeline.attempts.GenerationFailure` per failed attempt.
     """
 
     script: Optional[str]
     attempts: int
-    failures: List[Dict[str, Any]] = field(default_factory=list)
+    failures: List[GenerationFailure] = field(default_factory=list)
     model: Optional[str] = None
     context_hash: Optional[str] = None
     examples: List[str] = field(default_factory=list)
@@ -389,7 +390,7 @@ class SGResult:
 
     def failure_counts(self) -> Dict[str, int]:
         """Failures per category."""
-        return dict(Counter(f["category"] for f in self.failures))
+        return dict(Counter(f.category for f in self.failures))
 
     def as_dict(self) -> Dict[str, Any]:
         data = asdict(self)
@@ -509,8 +510,8 @@ def generate_with_llm(description: str, client: Any, bank: Any = None, *, retrie
             return result
         log.info("SG: attempt %d failed at %s (%s): %s", attempt, failure.stage, failure.category,
                  failure.message[:200])
-        result.failures.append({"attempt": attempt, "category": failure.category, "stage": failure.stage,
-                                "message": failure.message})
+        result.failures.append(GenerationFailure(attempt=attempt, category=failure.category, stage=failure.stage,
+                                                 message=failure.message))
         messages = messages + [
             {"role": "assistant", "content": reply.text},
             repair_message(attempt, failure.stage, failure.category, failure.message),
@@ -520,7 +521,7 @@ def generate_with_llm(description: str, client: Any, bank: Any = None, *, retrie
         last = result.failures[-1]
         raise GenerationFailedError(
             f"the LLM {result.model!r} at {client.endpoint} produced no script that passed the checks in "
-            f"{max_attempts} attempt(s) ({counts}); last failure at {last['stage']}: {last['message'][:300]}. "
+            f"{max_attempts} attempt(s) ({counts}); last failure at {last.stage}: {last.message[:300]}. "
             "Rephrase or simplify the description, raise max_attempts, or use a stronger model.",
             result,
         )
