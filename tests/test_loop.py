@@ -1255,16 +1255,16 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
     `before` step is not run again there, so its pair is in no rate or test, as the report says."""
     import dv2s_gym.mining.heldout as heldout
     from dv2s_gym.mining.loop import errored_episodes, heldout_comparison
+    from scenario_bank.records import HeldOutEpisode
 
     runs = []
 
     def task(t):
         runs.append((t["role"], t["scenario"], t["seed"]))
-        episode = {key: t[key] for key in ("role", "scenario", "seed", "policy")}  # a held-out episode's fields
+        episode = HeldOutEpisode(role=t["role"], scenario=t["scenario"], seed=t["seed"], policy=t["policy"])
         if (t["role"], t["scenario"], t["seed"]) == ("before", "s1", 0):
-            return {**episode, "failed": None, "failure": None, "result": None, "error": "TimeoutError: worker hung"}
-        return {**episode, "failed": t["role"] == "after" and t["seed"] == 0, "failure": None, "result": None,
-                "error": None}
+            return episode.replace(error="TimeoutError: worker hung")
+        return episode.replace(failed=t["role"] == "after" and t["seed"] == 0)
 
     monkeypatch.setattr(heldout, "heldout_task", task)
     path = tmp_path / "heldout.jsonl"
@@ -1275,7 +1275,7 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
     store = HeldOutStore(path)  # as the `after` step opens it
     before = evaluate_heldout("before", "P0", episodes, store=store, **settings)
     after = evaluate_heldout("after", "P1", episodes, store=store, **settings)
-    assert runs.count(("before", "s1", 0)) == 1 and before == first
+    assert runs.count(("before", "s1", 0)) == 1 and [r.to_dict() for r in before] == [r.to_dict() for r in first]
     summary = heldout_comparison(before, after, None, min_episodes=0, seed=0)
     assert summary["pairs"] == 3 and summary["errors"] == 1
 

@@ -30,6 +30,7 @@ import numpy as np
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.monitors import DEFAULT_MONITOR
 from dv2s_gym.mining.tasks import HELDOUT, heldout_task
+from scenario_bank.records import HeldOutEpisode
 from dv2s_gym.regress.stats import mcnemar_exact, PairedTable, wilson_interval
 from dv2s_gym.workers.pool import LocalBackend
 from dv2s_gym.workers.settings import WorkerSettings
@@ -46,23 +47,24 @@ class HeldOutStore:
 
     def __init__(self, path: os.PathLike | str) -> None:
         self.path = Path(path)
-        self.records: Dict[Tuple[str, str, int], Dict[str, Any]] = {}
+        self.records: Dict[Tuple[str, str, int], HeldOutEpisode] = {}
         # a line cut by a kill is left out: its episode runs again. An episode that errored is finished too (its
         # error is its outcome): running only the errored episodes again would give one policy a second draw on
         # exactly those episodes, and the report, which counts them in no rate or test, would not say so
-        for record in read_rows(self.path):
-            self.records[(record["role"], record["scenario"], int(record["seed"]))] = record
+        for row in read_rows(self.path):
+            record = HeldOutEpisode.from_dict(row)
+            self.records[(record.role, record.scenario, record.seed)] = record
 
-    def append(self, record: Mapping[str, Any]) -> None:
+    def append(self, record: HeldOutEpisode) -> None:
         """Save one finished episode (fsynced)."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
         with open(self.path, "a", encoding="utf-8") as handle:
-            handle.write(json.dumps(dict(record), sort_keys=True, default=str) + "\n")
+            handle.write(json.dumps(record.to_dict(), sort_keys=True, default=str) + "\n")
             handle.flush()
             os.fsync(handle.fileno())
-        self.records[(record["role"], record["scenario"], int(record["seed"]))] = dict(record)
+        self.records[(record.role, record.scenario, record.seed)] = record
 
-    def get(self, role: str, scenario: str, seed: int) -> Optional[Dict[str, Any]]:
+    def get(self, role: str, scenario: str, seed: int) -> Optional[HeldOutEpisode]:
         """The record of one episode, or ``None`` when it has not run."""
         return self.records.get((role, scenario, int(seed)))
 
@@ -70,8 +72,9 @@ class HeldOutStore:
 def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, store: HeldOutStore,
                      bank_dir: Optional[str], env_config: Optional[Dict[str, Any]] = None,
                      workers: WorkerSettings = WorkerSettings(workers=1),
-                     progress: bool = True) -> List[Dict[str, Any]]:
-    """Run ``policy`` as ``role`` on every episode not yet in ``store``; returns the records in episode order.
+                     progress: bool = True) -> List[HeldOutEpisode]:
+    """Run ``policy`` as ``role`` on every episode not yet in ``store``; returns the records in episode order (an
+    episode that did not run is a record whose ``error`` says so).
 
     ``workers``: local worker processes (``workers`` 1: in this process) and the seconds one episode may take on a
     worker before it counts as hung (``timeout``; default that of :class:`~dv2s_gym.workers.pool.LocalBackend`).
@@ -91,8 +94,8 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
                 if bar is not None:
                     bar.update(1)
         elif tasks:
-            def finished(record: Dict[str, Any]) -> None:
-                store.append({"policy": policy, "failed": None, "failure": None, "result": None, **record})
+            def finished(record: Dict[str, Any]) -> None:  # a worker's HeldOutEpisode, as JSON
+                store.append(HeldOutEpisode.from_dict({"policy": policy, **record}))
                 if bar is not None:
                     bar.update(1)
 
@@ -101,8 +104,8 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
     finally:
         if bar is not None:
             bar.close()
-    return [store.get(role, scenario, seed) or {"role": role, "scenario": scenario, "seed": int(seed),
-                                                "error": "did not run", "failed": None}
+    return [store.get(role, scenario, seed)
+            or HeldOutEpisode(role=role, scenario=scenario, seed=int(seed), policy=policy, error="did not run")
             for scenario, seed in episodes]
 
 
