@@ -675,7 +675,8 @@ def test_the_replay_lists_every_value_the_script_draws_outside_its_params():
               "ego = new Car at lane.centerline.pointAlongBy(egoS),\n    with speed Range(20, 27)\n"
               "lead = new Car ahead of ego by globalParameters.gap\n"
               "walker = new Pedestrian on lane.centerline\nmarker = new OrientedPoint\n"
-              "new Car following roadDirection from ego for 30, with behavior FollowLaneBehavior(target_speed=Range(9, 11))\n")
+              "new Car following roadDirection from ego for 30, with behavior FollowLaneBehavior(target_speed=Range(9, 11))\n"
+              "recordedGap = Range(1, 3)\nrequire (distance to lead) > 5\n")
     narrowed, intervals, not_narrowed = narrowed_script(script, {"gap": 25.0})
     assert intervals == {"gap": [24.6, 25.4]}
     assert not_narrowed == {
@@ -684,7 +685,8 @@ def test_the_replay_lists_every_value_the_script_draws_outside_its_params():
         "behavior Wobble": "outside the params, draws Range(0.2, 0.4)",
         "ego": "outside the params, draws Range(20, 27)",
         "walker": "outside the params, its position is drawn at random (on lane.centerline)",
-        "<Car 12>": "outside the params, draws Range(9, 11)"}
+        "<Car 12>": "outside the params, draws Range(9, 11)",
+        "recordedGap": "outside the params, draws Range(1, 3)"}  # a name that starts like a statement is a name
     assert "lead" not in not_narrowed and "marker" not in not_narrowed and "fixedLane" not in not_narrowed
 
 

@@ -30,7 +30,8 @@ _HEAD = re.compile(r"^(behavior|def|monitor|scenario)\s+(\w+)")
 _FIXED_POSITION = re.compile(r"^(at|offset\s+by|offset\s+along|left\s+of|right\s+of|ahead\s+of|behind|beyond|"
                              r"following)\b")
 _REGION_POSITION = re.compile(r"^(on|in|visible|not\s+visible|contained\s+in)\b")
-_NOT_SCENE = ("param", "model", "import", "from", "require", "terminate", "record", "mutate")
+_NOT_SCENE = re.compile(r"^(param|model|import|from|require|terminate|record|mutate)\b")
+"""Statements that draw nothing of the scene (a ``param`` line is narrowed or listed on its own)."""
 
 
 def _calls(text: str) -> List[str]:
@@ -84,7 +85,7 @@ def inline_draws(script: str) -> Dict[str, str]:
     draw for each."""
     out: Dict[str, str] = {}
     for index, statement in enumerate(top_statements(script), start=1):
-        if statement.startswith(_NOT_SCENE):
+        if _NOT_SCENE.match(statement):
             continue
         draws = _calls(statement)
         created = _OBJECT.match(statement)
