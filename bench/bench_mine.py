@@ -99,7 +99,7 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
         "scenarios_failing": len({r["scenario"] for r in failures}),
         "kinds": len({(r["scenario"], r["failure"]["kind"]) for r in failures}), "seconds": seconds,
         "rate": (overall.value, overall.low, overall.high, overall.ess) if overall else None,
-        "collapsed": bool(rate.get("collapsed")),
+        "collapsed": rate.collapsed,
     }
 
 
