@@ -37,11 +37,11 @@ from envs.sandbox_checks import check_compiles_and_runs
 from scenario_bank.jail import wire
 from scenario_bank.jail.limits import start_charging_cpu
 from scenario_bank.safety import check_script
+from scenario_bank.simulator_worker import SCRATCH
 from envs.jailed_env import space_to_data
 
-__all__ = ["SCRATCH", "preload", "serve", "main"]
+__all__ = ["preload", "serve", "main"]
 
-SCRATCH = "/tmp/scenarios"
 _DRIVER_MODULES = ("policies.",)
 
 

@@ -33,6 +33,7 @@ from envs.scenarios import ParamRange, read_scenario_file
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.maps import list_maps, resolve_map, UnknownMapError
 from scenario_bank.safety import UnsafeScenarioError
+from scenario_bank.simulator_worker import SCRATCH
 from scenario_bank.errors import MissingFileError, UnknownScenarioError, WrongTypeError
 from scenario_bank.safe_files import UnsafeInputError
 
@@ -40,7 +41,6 @@ __all__ = ["JailedDV2SEnv", "SpaceDataError", "space_to_data", "data_to_space", 
 
 MAX_MAP_BYTES = 64 * 2**20  # all map files of one scenario together
 MAX_MAP_FILES = 4
-_JAIL_SCENARIOS = "/tmp/scenarios"  # envs.jail_worker.SCRATCH: where the worker writes the scripts it runs
 _MAP_LINE = re.compile(r"""^[ \t]*param[ \t]+(map|sumo_map)[ \t]*=[ \t]*(localPath[ \t]*\([ \t]*)?(['"])([^'"\n\\]{1,1024})\3""",
                        re.M)
 
@@ -253,13 +253,13 @@ class JailedDV2SEnv(gym.Env):
         next folder; each prefix becomes the folder the file came from (a text's script: its name).
         """
         for index, ref in enumerate(self._refs):
-            prefix = f"{_JAIL_SCENARIOS}/{index}/"
+            prefix = f"{SCRATCH}/{index}/"
             script = Path(ref.path).name if ref.path and ref.path.endswith(".scenic") else "scenario.scenic"
             text = text.replace(prefix + script, ref.path or ref.name)
             if ref.path:
                 text = text.replace(prefix, str(Path(ref.path).parent) + "/")
         if self._host_map is not None:
-            text = text.replace(f"{_JAIL_SCENARIOS}/{len(self._refs)}/", str(Path(self._host_map).parent) + "/")
+            text = text.replace(f"{SCRATCH}/{len(self._refs)}/", str(Path(self._host_map).parent) + "/")
         return text
 
     # ------------------------------------------------------------------ Gymnasium API

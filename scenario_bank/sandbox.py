@@ -35,7 +35,7 @@ from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLim
 from scenario_bank.jail.process import JailRemoteError
 from scenario_bank.precheck import precheck_text
 from scenario_bank.safety import SafetyFinding, UnsafeScenarioError
-from scenario_bank.simulator_worker import simulator_worker
+from scenario_bank.simulator_worker import SCRATCH, simulator_worker
 from scenario_bank.errors import DV2SError
 from scenario_bank.errors import SettingError, WrongTypeError
 
@@ -263,15 +263,11 @@ def _cache_key(script: str, limits: SandboxLimits, request: Dict[str, Any]) -> s
     return hashlib.sha256(payload.encode()).hexdigest()
 
 
-_JAIL_SCRATCH = "/tmp/scenarios"
-"""Where the jailed worker writes the scripts it runs (``envs.jail_worker.SCRATCH``): a path the user never saw."""
-
-
 def _outside_names(message: str, name: str) -> str:
     """``message`` with the jail's copy of the script named as the caller named it (``name``), and the files
     beside it by their names alone."""
-    message = re.sub(re.escape(_JAIL_SCRATCH) + r"/\d+/[^/\s,:]+\.scenic", lambda _: name, message)
-    return re.sub(re.escape(_JAIL_SCRATCH) + r"/\d+/", "", message)
+    message = re.sub(re.escape(SCRATCH) + r"/\d+/[^/\s,:]+\.scenic", lambda _: name, message)
+    return re.sub(re.escape(SCRATCH) + r"/\d+/", "", message)
 
 
 def verify_script(

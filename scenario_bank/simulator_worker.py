@@ -18,7 +18,11 @@ from typing import Optional
 
 from scenario_bank.errors import DV2SError, SettingError
 
-__all__ = ["NoSimulatorError", "use_simulator_worker", "simulator_worker"]
+__all__ = ["NoSimulatorError", "use_simulator_worker", "simulator_worker", "SCRATCH"]
+
+SCRATCH = "/tmp/scenarios"
+"""Where a worker writes the scripts it runs inside the jail (scenario ``i`` in ``SCRATCH/i/``): a path the user
+never saw, which the host names back as the user named the script."""
 
 _WORKER: Optional[str] = None
 
