@@ -110,10 +110,7 @@ def narrowed_script(script: str, params: Mapping[str, Any], narrow: float = NARR
         else:
             skipped[name] = (f"its distribution {expression.strip()} mixes intervals and separate values "
                              f"({support_text(parts)}), so it keeps the parent's")
-    for label, why in inline_draws(script).items():
-        while label in skipped:
-            label += "'"
-        skipped[label] = why
+    skipped.update(inline_draws(script, taken=skipped))
     return "".join(lines), intervals, skipped
 
 

@@ -1253,10 +1253,11 @@ def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> No
             value = untouched.failure_rate(role)
             return "-" if value is None else f"{value:.2f}"
 
+        vacuous = untouched.vacuous()
         log(f"round {number}: untouched set failure rate start {share('start')}, control {share('control')}, "
             f"fine-tuned {share('fine_tuned')}; fine-tuned vs start "
             f"{(untouched.fine_tuned_vs_start or RegressComparison()).verdict}"
-            + (f"; WARNING: {untouched.vacuous()}" if untouched.vacuous() else ""))
+            + (f"; WARNING: {vacuous}" if vacuous else ""))
     regress = steps.regress or RegressSummary()
     log(f"round {number}: rest of the bank: {regress.verdict} ({regress.reason})")
 

@@ -423,8 +423,9 @@ def _untouched_lines(untouched: Optional[UntouchedComparison]) -> List[str]:
                      f"{_summary_rate(row.get('stall_rate'))} | {_summary_rate(row.get('collision_rate'))} | "
                      f"{'-' if speed is None else f'{speed:.1f}'} |")
     lines.append("")
-    if untouched.vacuous():
-        lines.append(f"- **WARNING: {untouched.vacuous()}**")
+    vacuous = untouched.vacuous()
+    if vacuous:
+        lines.append(f"- **WARNING: {vacuous}**")
     for comparison, label in ((untouched.fine_tuned_vs_start, "fine-tuned against start"),
                               (untouched.control_vs_fine_tuned, "control against fine-tuned")):
         if comparison:

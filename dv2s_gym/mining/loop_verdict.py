@@ -297,8 +297,9 @@ def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
     margin = tests["start"]["family_harm"]["margin"]  # the test against the start always ran here (else missing)
     control_note += (f"; no held-out family worse for the fine-tuned policy by more than the margin "
                      f"{100 * margin:+.1f} pp ({FAMILY_RULE})")
-    if steps.untouched is not None and steps.untouched.vacuous():
-        control_note += f"; on the untouched set {steps.untouched.vacuous()}"
+    vacuous = steps.untouched.vacuous() if steps.untouched is not None else None
+    if vacuous:
+        control_note += f"; on the untouched set {vacuous}"
     return {"verdict": ACCEPTED, "decided_by": "all",
             "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.reason}); on "
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}

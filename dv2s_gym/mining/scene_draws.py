@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from dv2s_gym.mining.param_meaning import PLACEMENT_KINDS
 from dv2s_gym.mining.scenic_statements import split_top, top_statements
-from typing import Dict, List
+from typing import Collection, Dict, List
 
 __all__ = ["inline_draws", "DRAWS"]
 
@@ -77,12 +77,12 @@ def _label(statement: str, index: int) -> str:
     return f"<{created.group(2)} {index}>" if created else f"<statement {index}>"
 
 
-def inline_draws(script: str) -> Dict[str, str]:
+def inline_draws(script: str, taken: Collection[str] = ()) -> Dict[str, str]:
     """``{what: why}`` of every value ``script`` draws outside its ``param`` lines, one entry per top-level
     statement that draws (a variable's name, an object's name, ``behavior NAME``, or ``<Car 7>`` for the 7th
     statement when unnamed): the distributions it writes and, for an object, a position drawn on a region
     (``"outside the params, draws Range(50, 1200)"``). No mining run records these, so a replay keeps the parent's
-    draw for each."""
+    draw for each. A label already used, here or in ``taken`` (the params listed beside these), gets a ``'``."""
     out: Dict[str, str] = {}
     for index, statement in enumerate(top_statements(script), start=1):
         if _NOT_SCENE.match(statement):
@@ -94,7 +94,7 @@ def inline_draws(script: str) -> Dict[str, str]:
             continue
         parts = ([f"draws {', '.join(dict.fromkeys(draws))}"] if draws else []) + ([position] if position else [])
         label = _label(statement, index)
-        while label in out:
+        while label in out or label in taken:
             label += "'"
         out[label] = "outside the params, " + "; ".join(parts)
     return out
