@@ -27,7 +27,10 @@ SCRIPTS = [
 @pytest.mark.parametrize("name", SCRIPTS)
 def test_corpus_script_runs_in_dv2s(name):
     path = CORPUS / name
-    env = gym.make("dv2s_gym:DV2S-v0", scenario=str(path))
+    # carlaChallenge8's three placement requirements accept about one draw in 500 (seeds 0-11 need 19 to 2,083
+    # draws): the default budget of 2,000 would refuse a few percent of scenes, which is Scenic's sampler, not the
+    # facade this test is about
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=str(path), config={"max_sample_iterations": 20_000})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         env.reset(seed=0)
