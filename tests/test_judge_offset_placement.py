@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import pytest
 
-from dv2s_gym.mining.convert import _judge, compare_parameters
+from dv2s_gym.mining.conversion_judge import judge_conversion
+from dv2s_gym.mining.conversion_parameters import compare_parameters
 from dv2s_gym.mining.param_meaning import fixed_quantities, quantity_uses
 
 HEAD = """param map = 'highway_straight'
@@ -45,7 +46,7 @@ def script(placement: str, params: str = "", before: str = "") -> str:
 def judged(new_script: str, parent: str = PARENT, failing=None):
     """The parameter comparison and the judge's rejections of ``new_script`` as a conversion of the failure."""
     parameters = compare_parameters(failing or FAILING, new_script, parent, INTERACTION)
-    rejections = _judge({"reproduction": REPRODUCED, "parameters": parameters}, INTERACTION,
+    rejections = judge_conversion({"reproduction": REPRODUCED, "parameters": parameters}, INTERACTION,
                         {"type": "collision", "with_kind": "car"}, 0.3)
     return parameters, [str(r) for r in rejections]
 

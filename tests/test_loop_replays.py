@@ -11,7 +11,7 @@ import json
 import pytest
 
 from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.convert import replay_failure_entry
+from dv2s_gym.mining.conversion_replay import replay_failure_entry
 from dv2s_gym.mining.exact_replay import replay_failure
 from scenario_bank.bank import Bank, Sidecar
 from scenario_bank.records import EpisodeRecord

@@ -14,7 +14,10 @@ import pytest
 
 import dv2s_gym.mining.convert as convert_module
 from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.convert import _exact, convert_failure, replay_failure_entry, reproduction_seeds, same_failure_class
+from dv2s_gym.mining.conversion_episodes import reproduction_seeds, same_failure_class
+from dv2s_gym.mining.conversion_ranges import exact_number
+from dv2s_gym.mining.conversion_replay import replay_failure_entry
+from dv2s_gym.mining.convert import convert_failure
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.mining.exact_replay import replay_failure
@@ -372,7 +375,7 @@ def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
     assert row["parameters"]["outside"] == outside
     if outside:
         assert row["status"] == "rejected" and row["bank_entry"] is None, row
-        assert any(r.startswith("parameters: ") and all(f"{name} = {_exact(failing[name])} outside" in r for name in outside)
+        assert any(r.startswith("parameters: ") and all(f"{name} = {exact_number(failing[name])} outside" in r for name in outside)
                    for r in row["rejections"])
     else:
         assert row["status"] == "kept", row
@@ -469,28 +472,30 @@ def test_a_script_without_the_failures_interaction_is_rejected_though_the_policy
 
 
 def test_each_failed_check_of_the_judge_is_its_own_reason():
-    from dv2s_gym.mining.convert import _judge
+    from dv2s_gym.mining.conversion_judge import judge_conversion
 
     interaction = {"kind": "car", "manoeuvres": ["brake", "stop"], "failure_type": "stall"}
     out = {"reproduction": {"k": 10, "reproduced": 2, "rate": 0.2, "interaction_shown": 1},
            "avoidability": {"reference": "rule", "k": 10, "failed": 6, "avoided_rate": 0.4}}
-    reasons = [str(r) for r in _judge(out, interaction, {"type": "stall"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion(out, interaction, {"type": "stall"}, 0.3)]
     assert [r.split(":")[0] for r in reasons] == ["interaction", "reproduction", "avoidability"]
     assert "car (brake, stop) in 1 of 10" in reasons[0] and "stall failure with a car in 2 of 10" in reasons[1]
     assert "rule failed in 6 of 10" in reasons[2]
     passing = {"reproduction": {"k": 10, "reproduced": 3, "rate": 0.3, "interaction_shown": 3},
                "avoidability": {"reference": "rule", "k": 10, "failed": 4, "avoided_rate": 0.6}}
-    assert _judge(passing, interaction, {"type": "stall"}, 0.3) == []
+    assert judge_conversion(passing, interaction, {"type": "stall"}, 0.3) == []
     # the reference avoiding it in half of the episodes is not "most"
     half = {**passing, "avoidability": {"reference": "rule", "k": 10, "failed": 5, "avoided_rate": 0.5}}
-    assert [str(r).split(":")[0] for r in _judge(half, interaction, {"type": "stall"}, 0.3)] == ["avoidability"]
+    assert [str(r).split(":")[0] for r in judge_conversion(half, interaction, {"type": "stall"}, 0.3)] == ["avoidability"]
 
 
 def test_the_judge_rejects_a_script_whose_actors_or_parameter_ranges_are_not_the_failures():
     """The failure: the ego ran into a car cutting in while a pedestrian crossed (two actors, the adversary a car).
     A script that reproduces it and that the reference avoids is still rejected, each problem its own reason,
     when its actors differ from the failure's or its ranges leave out the failing values."""
-    from dv2s_gym.mining.convert import _judge, compare_actors, compare_parameters
+    from dv2s_gym.mining.conversion_episodes import compare_actors
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     interaction = {"kind": "car", "manoeuvres": ["cut_in"]}
     failure = {"type": "collision", "with_kind": "car"}
@@ -505,29 +510,29 @@ def test_the_judge_rejects_a_script_whose_actors_or_parameter_ranges_are_not_the
                                  "kerb_offset": 2.9}, script)
     assert inside["outside"] == [] and inside["not_in_script"] == ["kerb_offset"]
     assert inside["compared"]["cut_gap"] == {"value": 4.0, "range": [4.0, 9.0]}
-    assert _judge({**passing, "actors": same, "parameters": inside}, interaction, failure, 0.3) == []
+    assert judge_conversion({**passing, "actors": same, "parameters": inside}, interaction, failure, 0.3) == []
 
     no_adversary = compare_actors(source, [{"pedestrian": 1}], "car")
     fewer = compare_actors(source, [{"car": 1}], "car")
     more = compare_actors(source, [{"car": 2, "pedestrian": 1}], "car")
     outside = compare_parameters({"ego_speed": 12.5, "cut_gap": 3.2}, script)
     assert outside["outside"] == ["cut_gap", "ego_speed"]
-    reasons = [str(r) for r in _judge({**passing, "actors": no_adversary, "parameters": outside}, interaction,
+    reasons = [str(r) for r in judge_conversion({**passing, "actors": no_adversary, "parameters": outside}, interaction,
                                       failure, 0.3)]
     assert reasons == ["actors: the failure's scene has 2 actors (car 1, pedestrian 1), the new scenario's 1 actor "
                        "(pedestrian 1): the failure's adversary, a car, is missing",
                        "parameters: the new scenario's ranges do not contain the failing values: cut_gap = 3.2 "
                        "outside 4..9, ego_speed = 12.5 outside 8..12"]
-    assert [str(r) for r in _judge({**passing, "actors": fewer}, interaction, failure, 0.3)] == [
+    assert [str(r) for r in judge_conversion({**passing, "actors": fewer}, interaction, failure, 0.3)] == [
         "actors: the failure's scene has 2 actors (car 1, pedestrian 1), the new scenario's 1 actor (car 1): "
         "1 pedestrian fewer"]
-    assert [str(r) for r in _judge({**passing, "actors": more}, interaction, failure, 0.3)] == [
+    assert [str(r) for r in judge_conversion({**passing, "actors": more}, interaction, failure, 0.3)] == [
         "actors: the failure's scene has 2 actors (car 1, pedestrian 1), the new scenario's 3 actors (car 2, "
         "pedestrian 1): 1 car more"]
 
 
 def test_the_actor_census_of_a_trace_counts_every_actor_but_the_ego_by_kind():
-    from dv2s_gym.mining.convert import actor_census
+    from dv2s_gym.mining.conversion_episodes import actor_census
 
     trace = EpisodeTrace(scenario="s", source="", seed=0, scene_seed=0, params={}, config={},
                          states=[{"ego": [0, 0], "lead": [1, 0]}, {"ego": [0, 0], "lead": [1, 0], "walker": [2, 2]}],
@@ -536,7 +541,8 @@ def test_the_actor_census_of_a_trace_counts_every_actor_but_the_ego_by_kind():
 
 
 def test_any_reference_failure_counts_against_the_new_scenario_whatever_its_class():
-    from dv2s_gym.mining.convert import _judge, reference_failed, reference_outcome
+    from dv2s_gym.mining.conversion_episodes import reference_failed, reference_outcome
+    from dv2s_gym.mining.conversion_judge import judge_conversion
 
     rear = {"type": "collision", "with_kind": "car", "collision_type": "rear_end"}
     behind = {"type": "collision", "with_kind": "car", "collision_type": "struck_from_behind",
@@ -553,7 +559,7 @@ def test_any_reference_failure_counts_against_the_new_scenario_whatever_its_clas
     assert outcome == {"reference": "rule", "k": 5, "failed": 3, "avoided_rate": pytest.approx(0.4),
                        "failures": {"collision:struck_from_behind": 2, "stall": 1}}
     out = {"reproduction": {"k": 5, "reproduced": 5, "rate": 1.0, "interaction_shown": 5}, "avoidability": outcome}
-    reasons = [str(r) for r in _judge(out, {"kind": "car", "manoeuvres": ["stop"]}, rear, 0.3)]
+    reasons = [str(r) for r in judge_conversion(out, {"kind": "car", "manoeuvres": ["stop"]}, rear, 0.3)]
     assert reasons == ["avoidability: the reference driver rule failed in 3 of 5 episodes of the new scenario "
                        "(collision:struck_from_behind 2, stall 1); it must drive most of them without any "
                        "collision, off-road or stall"]
@@ -691,21 +697,22 @@ def test_the_replay_lists_every_value_the_script_draws_outside_its_params():
 
 
 def test_the_judge_compares_parameter_names_without_case_and_never_prints_an_outside_value_as_inside():
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     passing = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interaction_shown": 10},
                "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
     judged = compare_parameters({"lead_speed": 12.0}, "param Lead_Speed = Range(5, 10)\n")
     assert judged["outside"] == ["lead_speed"] and judged["not_in_script"] == []
-    assert [str(r) for r in _judge({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)] == [
+    assert [str(r) for r in judge_conversion({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)] == [
         "parameters: the new scenario's ranges do not contain the failing values: lead_speed (the script's "
         "Lead_Speed) = 12 outside 5..10"]
     just_past = compare_parameters({"lead_speed": 10.00001}, "param lead_speed = Range(5, 10)\n")
-    assert [str(r) for r in _judge({**passing, "parameters": just_past}, {}, {"type": "collision"}, 0.3)] == [
+    assert [str(r) for r in judge_conversion({**passing, "parameters": just_past}, {}, {"type": "collision"}, 0.3)] == [
         "parameters: the new scenario's ranges do not contain the failing values: lead_speed = 10.00001 "
         "outside 5..10"]
     below = compare_parameters({"gap": 5.0000001}, "param gap = Range(5.0000002, 9)\n")
-    assert "gap = 5.0000001 outside 5.0000002..9" in str(_judge({**passing, "parameters": below}, {},
+    assert "gap = 5.0000001 outside 5.0000002..9" in str(judge_conversion({**passing, "parameters": below}, {},
                                                                 {"type": "collision"}, 0.3)[0])
 
 
@@ -757,7 +764,8 @@ def test_the_judge_compares_a_failing_parameter_with_the_generated_one_that_sets
     ``car1_start``, its extra speed ``car1_extra_speed``, the crossing's distance ``pedestrian1_distance``. Each is
     paired by the actor it feeds and the quantity it sets; what the new script sets with no parameter (the speed after
     the cut-in, the kerb offset) is listed as not compared, with why."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     failing = {"ego_speed": 21.0, "cutter_extra_speed": 5.0, "start_offset": -6.0, "cut_in_gap": 8.0,
                "speed_after_cut_in": 0.0, "crossing_distance": 40.0, "kerb_offset": 2.8, "weather": "a"}
@@ -774,7 +782,7 @@ def test_the_judge_compares_a_failing_parameter_with_the_generated_one_that_sets
     assert judged["outside"] == ["cut_in_gap", "start_offset"]  # 8 outside 10..15, -6 outside 7..11
     passing = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interaction_shown": 10},
                "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
-    unread, reason = [str(r) for r in _judge({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    unread, reason = [str(r) for r in judge_conversion({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
     # with no actor named, every actor's placement is key: the walker to the right of its spot, the new script's
     # pedestrian to the left of its own
     assert unread.startswith("parameters: a key quantity (of the failure's interaction) is placed by another quantity "
@@ -840,7 +848,8 @@ def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_coun
     """The judge could not compare parameters for several reasons (no counterpart, a distribution that is not an
     interval, a name match that reaches no object, one actor for two); the judge's reason, report.md and report.html
     name each with its count instead of calling them all "no parameter means the same"."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
     from dv2s_gym.mining.html import render_html
     from dv2s_gym.mining.report import build_report_from_records, markdown
 
@@ -850,7 +859,7 @@ def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_coun
     failing = {**_CUT_FAILING, "kerb_offset": 2.8}
     judged = compare_parameters(failing, opaque, parent=_CUT_PARENT + "param kerb_offset = Range(2, 3)\n")
     assert judged["outside"] == ["lane_change_duration"]
-    key, reason = [str(r) for r in _judge({**_PASSING, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    key, reason = [str(r) for r in judge_conversion({**_PASSING, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
     # the cutter's gap is a quantity of the failure's interaction the new script sets by its own g: a rejection too
     assert key.startswith("parameters: a key parameter") and "cut_in_gap (the Car cutter's behaviour argument" in key
     assert reason.endswith("(not compared: cut_in_gap whose counterpart's distribution is not an interval the judge "
@@ -895,10 +904,11 @@ _PASSING = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interactio
 
 
 def _judged(generated, parent=_CUT_PARENT, failing=_CUT_FAILING):
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     compared = compare_parameters(failing, generated, parent=parent)
-    return compared, [str(r) for r in _judge({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
+    return compared, [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
 
 
 def test_parameters_named_alike_but_swapped_are_not_compared_and_the_judge_rejects():
@@ -981,16 +991,17 @@ def test_one_actor_of_the_new_script_cannot_stand_for_two_of_the_parent():
 def test_the_failures_actors_must_be_the_scene_in_a_majority_of_the_runs():
     """Four of ten runs with the failure's one car, three with a pedestrian too, three with two cars: the most
     common set is the failure's, but not in most runs."""
-    from dv2s_gym.mining.convert import _judge, compare_actors
+    from dv2s_gym.mining.conversion_episodes import compare_actors
+    from dv2s_gym.mining.conversion_judge import judge_conversion
 
     split = compare_actors({"car": 1}, [{"car": 1}] * 4 + [{"car": 1, "pedestrian": 1}] * 3 + [{"car": 2}] * 3, "car")
     assert split["script"] == {"car": 1} and split["runs_matching"] == 4 and not split["same"]
-    (reason,) = [str(r) for r in _judge({**_PASSING, "actors": split}, {}, {"type": "collision"}, 0.3)]
+    (reason,) = [str(r) for r in judge_conversion({**_PASSING, "actors": split}, {}, {"type": "collision"}, 0.3)]
     assert reason.startswith("actors:") and "in only 4 of 10 runs (a majority needed)" in reason
     tie = compare_actors({"car": 1}, [{"car": 1}] * 5 + [{"car": 1, "pedestrian": 1}] * 5, "car")
     assert not tie["same"]
     most = compare_actors({"car": 1}, [{"car": 1}] * 6 + [{"car": 2}] * 4, "car")
-    assert most["same"] and not _judge({**_PASSING, "actors": most}, {}, {"type": "collision"}, 0.3)
+    assert most["same"] and not judge_conversion({**_PASSING, "actors": most}, {}, {"type": "collision"}, 0.3)
 
 
 # --------------------------------------------------------------------------- a counterpart through an affine expression
@@ -1055,7 +1066,7 @@ def test_an_expression_the_judge_cannot_read_stays_not_comparable():
 
 
 def test_an_affine_placement_distance_is_read_through():
-    from dv2s_gym.mining.convert import compare_parameters
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     parent = ("param lead_gap = Range(5, 11)\nego = new Car on lane.centerline\n"
               "lead = new Car ahead of ego by globalParameters.lead_gap\n")
@@ -1224,7 +1235,7 @@ def test_a_discrete_distribution_must_take_the_failing_value(gap_range, failing_
         assert compared["outside"] == ([] if inside else ["cut_in_gap"])
         if not inside:
             assert f"= {failing_gap:g} not among the values" in rejections[0] and f"({values})" in rejections[0]
-    from dv2s_gym.mining.convert import compare_parameters
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
     by_name = compare_parameters(failing, _cut_script("cut_in_gap", gap_range, "globalParameters.cut_in_gap"))
     assert by_name["outside"] == ([] if inside else ["cut_in_gap"])
 
@@ -1290,14 +1301,15 @@ def test_a_key_parameter_the_new_script_sets_by_its_own_parameter_must_be_compar
     """The merger's gap is a quantity of the failure's interaction (the key actor's): when the new script sets it by
     a parameter of its own the judge cannot compare, the script is rejected for that, though 3 of the failure's 4
     parameters compare (the half rule alone let it pass)."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     interaction = {"actor": "merger", "kind": "car"}
     compared = compare_parameters(_KEY_FAILING, _key_script(gap_expression, extra), parent=_KEY_PARENT,
                                   interaction=interaction)
     assert compared["key"] == {"ego_speed": "the ego's speed", "gap": "the Car merger's behaviour argument gap",
                                "dur": "the Car merger's behaviour argument duration"}
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     if gap_expression == "globalParameters.g":  # the control: the same script, gap set by g alone
         assert reasons == [] and compared["compared"]["gap"]["script_name"] == "g"
         return
@@ -1312,14 +1324,15 @@ def test_a_key_parameter_the_new_script_sets_by_its_own_parameter_must_be_compar
 def test_a_parameter_of_an_actor_beside_the_interaction_stays_within_the_half_rule():
     """The walker is no part of the failure with the merger: its speed set by the new script's own unreadable
     parameter is not compared, and with the other 3 compared the script passes."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     interaction = {"actor": "merger", "kind": "car"}
     generated = (_KEY_PARENT.replace("param traffic_speed = Range(20, 30)", "param w = Range(4, 6)")
                  .replace("globalParameters.traffic_speed", "globalParameters.w * globalParameters.w"))
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction=interaction)
     assert "traffic_speed" in compared["not_comparable"] and "traffic_speed" not in compared["key"]
-    assert _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3) == []
+    assert judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3) == []
     # with the key actor unknown, every actor's quantities are key: the walker's speed too
     unknown = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT)
     assert list(unknown["key_not_compared"]) == ["traffic_speed"]
@@ -1333,12 +1346,13 @@ def test_a_key_quantity_the_new_script_fixes_without_a_parameter_must_hold_the_f
     """A generated script parameterises the scene its own way: a key quantity it fixes (a number, an inline range,
     discrete values; a parameter times 0 is a number) is no comparison the judge failed and counts within the half
     rule, but only when it holds the failing value: the merger's gap fixed at 40..60 can never be the failing 6."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     generated = _key_script(fixed).replace("param g = Range(5, 11)\n", "")
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction={"actor": "merger"})
     assert "gap" in compared["not_comparable"] and compared["key_not_compared"] == {}
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
     if holds:
         assert reasons == [] and compared["key_fixed_outside"] == {}
         return
@@ -1370,11 +1384,12 @@ def test_a_parameter_times_zero_is_no_use_of_it():
 ])
 def test_a_key_quantity_fixed_away_from_the_failing_value_is_rejected_whatever_else_uses_the_parameter(
         generated, reason_start):
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     interaction = {"actor": "merger", "kind": "car"}
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction=interaction)
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert reasons and reasons[0].startswith("parameters: a key quantity (of the failure's interaction) that the new "
                                              "script fixes must hold the failing value, and it does not: " + reason_start)
 
@@ -1386,13 +1401,15 @@ def test_a_key_quantity_fixed_away_from_the_failing_value_is_rejected_whatever_e
 def test_a_fixed_key_value_holds_the_failing_value_within_the_replay_narrowing_of_the_parents_width(fixed, holds):
     """A faithful script may fix a timing at a round number: it holds the failing value when it lies within
     FIXED_TOLERANCE (the replay narrowing, NARROW) of the width the parent's range gives the quantity, no further."""
-    from dv2s_gym.mining.convert import FIXED_TOLERANCE, _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_keys import FIXED_TOLERANCE
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
     from dv2s_gym.mining.exact_replay import NARROW
 
     assert FIXED_TOLERANCE == NARROW == 0.02
     generated = _key_script(fixed).replace("param g = Range(5, 11)\n", "")
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction={"actor": "merger"})
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
     assert (reasons == []) is holds
     assert (compared["key_fixed_outside"] == {}) is holds
 
@@ -1400,7 +1417,7 @@ def test_a_fixed_key_value_holds_the_failing_value_within_the_replay_narrowing_o
 def test_the_tolerance_of_a_fixed_key_value_follows_the_parents_expression():
     """The parent sets the merger's speed by ego_speed + 5 (range 18..25, width 7: 0.14 of tolerance on the
     quantity, failing quantity 25): 25.1 holds it, 25.2 does not."""
-    from dv2s_gym.mining.convert import compare_parameters
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     parent = _KEY_PARENT.replace("    with speed 25,\n", "    with speed globalParameters.ego_speed + 5,\n")
     interaction = {"actor": "merger", "kind": "car"}
@@ -1434,16 +1451,17 @@ def test_a_key_behaviour_argument_the_behaviour_assigns_anew_is_rejected(stateme
     """The walker's pace is passed to Walk, but a body that assigns pace anew walks at another pace whatever the
     parameter: rejected as an override, unless the value it assigns holds the failing value (1.41 against 1.4,
     within 0.02); another name assigned is no override."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     generated = _OVERRIDE_PARENT.replace("    take SetWalkingSpeedAction(pace)\n",
                                          f"    {statement}\n    take SetWalkingSpeedAction(pace)\n")
     interaction = {"actor": "walker", "kind": "pedestrian"}
-    assert [str(r) for r in _judge({**_PASSING, "parameters": compare_parameters(
+    assert [str(r) for r in judge_conversion({**_PASSING, "parameters": compare_parameters(
         _OVERRIDE_FAILING, _OVERRIDE_PARENT, parent=_OVERRIDE_PARENT, interaction=interaction)},
         interaction, {"type": "collision"}, 0.3)] == []
     compared = compare_parameters(_OVERRIDE_FAILING, generated, parent=_OVERRIDE_PARENT, interaction=interaction)
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     if holds:
         assert reasons == []
         return
@@ -1456,14 +1474,15 @@ def test_a_key_behaviour_argument_the_behaviour_assigns_anew_is_rejected(stateme
 
 
 def test_a_behaviour_the_parent_overrides_alike_is_no_override():
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     parent = _OVERRIDE_PARENT.replace("    take SetWalkingSpeedAction(pace)\n",
                                       "    pace = pace + 0.1\n    take SetWalkingSpeedAction(pace)\n")
     interaction = {"actor": "walker", "kind": "pedestrian"}
     compared = compare_parameters(_OVERRIDE_FAILING, parent, parent=parent, interaction=interaction)
     assert "key_overridden" not in compared
-    assert _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3) == []
+    assert judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3) == []
 
 
 @pytest.mark.parametrize("target, holds", [("30", False), ("10", True), ("10.05", True), ("10.2", False),
@@ -1471,14 +1490,15 @@ def test_a_behaviour_the_parent_overrides_alike_is_no_override():
 def test_the_egos_target_speed_is_read_as_its_speed(target, holds):
     """The parent sets the ego's speed by ego_speed and gives it no behaviour; the new script keeps the start speed
     but drives the ego at a fixed target speed: it must hold the failing 10 (within 2 % of 8..12, 0.08)."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     generated = _OVERRIDE_PARENT.replace("    with speed globalParameters.ego_speed\n",
                                          "    with speed globalParameters.ego_speed,\n"
                                          f"    with behavior FollowLaneBehavior(target_speed={target})\n")
     interaction = {"actor": "walker", "kind": "pedestrian"}
     compared = compare_parameters(_OVERRIDE_FAILING, generated, parent=_OVERRIDE_PARENT, interaction=interaction)
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert (reasons == []) is holds
     if not holds:
         assert "ego_speed (the ego's speed (as its behaviour's target speed), which the new script fixes at " in reasons[0]
@@ -1487,7 +1507,7 @@ def test_the_egos_target_speed_is_read_as_its_speed(target, holds):
 def test_a_behaviour_of_the_same_name_and_arguments_keeps_its_argument_check():
     """A body edited but the behaviour's name and arguments kept: a key argument fixed away from the failing value is
     still checked (a behaviour renamed, or with other arguments, may read it otherwise and is not)."""
-    from dv2s_gym.mining.convert import compare_parameters
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     interaction = {"actor": "walker", "kind": "pedestrian"}
     edited = _OVERRIDE_PARENT.replace("    wait\n", "    wait\n    wait\n").replace(
@@ -1521,7 +1541,8 @@ _JUNCTION_FAILING = {"ego_speed": 8.0, "ego_distance": 30.0, "bus_speed": 9.0, "
 def test_a_key_placement_set_by_a_product_of_parameters_is_compared_jointly(ego_distance, times, holds):
     """The parent places the ego ego_distance before the junction; the new script places it ego_speed * (lead +
     lag), a product the judge reads jointly: ego_speed held at the failing 8, lead and lag over their ranges."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     generated = (_JUNCTION_PARENT.replace("param ego_distance = Range(20, 40)", "param lead = " + times)
                  .replace("pointAlongBy(-globalParameters.ego_distance)",
@@ -1531,7 +1552,7 @@ def test_a_key_placement_set_by_a_product_of_parameters_is_compared_jointly(ego_
     compared = compare_parameters(failing, generated, parent=_JUNCTION_PARENT, interaction=interaction)
     assert compared["key_not_compared"] == {}
     assert compared["compared"]["ego_distance"]["jointly"] == "the ego's longitudinal placement"
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert (reasons == []) is holds
     if not holds:
         assert compared["outside"] == ["ego_distance"]
@@ -1541,7 +1562,7 @@ def test_a_key_placement_set_by_a_product_of_parameters_is_compared_jointly(ego_
 
 
 def test_a_product_that_uses_a_sampled_value_twice_is_not_read_jointly():
-    from dv2s_gym.mining.convert import compare_parameters
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     generated = (_JUNCTION_PARENT.replace("param ego_distance = Range(20, 40)", "param lead = Range(3, 5)")
                  .replace("pointAlongBy(-globalParameters.ego_distance)",
@@ -1555,14 +1576,15 @@ def test_a_product_that_uses_a_sampled_value_twice_is_not_read_jointly():
 def test_a_relative_speed_rewritten_as_absolute_is_compared_jointly(speed_range, holds):
     """The parent drives the bus at bus_speed + bus_extra (failing 9 + 2 = 11); the new script drives it at one
     parameter of its own: it must hold 11."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     generated = (_JUNCTION_PARENT.replace("param bus_extra = Range(1, 3)", "")
                  .replace("param bus_speed = Range(7, 11)", f"param bus_v = {speed_range}")
                  .replace("globalParameters.bus_speed + globalParameters.bus_extra", "globalParameters.bus_v"))
     interaction = {"actor": "bus", "kind": "bus"}
     compared = compare_parameters(_JUNCTION_FAILING, generated, parent=_JUNCTION_PARENT, interaction=interaction)
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert (reasons == []) is holds, reasons
 
 
@@ -1571,14 +1593,16 @@ def test_a_relative_speed_rewritten_as_absolute_is_compared_jointly(speed_range,
 def test_a_normal_parameter_is_read_as_three_standard_deviations_about_its_mean(distribution, holds):
     """The walker's pace drawn from a Normal: the failing 1.4 must lie within 3 standard deviations of its mean
     (1.2..1.8 and 1.39..1.51 hold it; 1.7..2.3 and 1.41..1.59 do not)."""
-    from dv2s_gym.mining.convert import NORMAL_SPREAD, _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion_ranges import NORMAL_SPREAD
 
     assert NORMAL_SPREAD == 3.0
     generated = _OVERRIDE_PARENT.replace("param pace = Range(1.0, 2.0)", f"param pace = {distribution}")
     interaction = {"actor": "walker", "kind": "pedestrian"}
     compared = compare_parameters(_OVERRIDE_FAILING, generated, parent=_OVERRIDE_PARENT, interaction=interaction)
     assert "pace" in compared["compared"]
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert (reasons == []) is holds
     assert (compared["outside"] == ["pace"]) is not holds
 
@@ -1589,7 +1613,8 @@ def test_an_actor_made_in_a_top_level_loop_that_runs_is_read_as_made_at_the_top_
     """The walker made in the body of a loop over range(1) or range(3) is compared as in the parent (its body runs;
     a specifier line after a trailing comma continues the statement at any indentation); over range(0), or a count
     the judge does not know, its parameters reach no object."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     generated = _OVERRIDE_PARENT.replace("walker = new Pedestrian ahead of ego by 30,\n    with name \"walker\",\n",
                                          f"{loop}\n    walker = new Pedestrian ahead of ego by 30,\n"
@@ -1597,7 +1622,7 @@ def test_an_actor_made_in_a_top_level_loop_that_runs_is_read_as_made_at_the_top_
     assert loop in generated
     interaction = {"actor": "walker", "kind": "pedestrian"}
     compared = compare_parameters(_OVERRIDE_FAILING, generated, parent=_OVERRIDE_PARENT, interaction=interaction)
-    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert (sorted(compared["compared"]) == ["ego_speed", "gap", "pace"]) is runs
     assert (reasons == []) is runs
 
@@ -1623,7 +1648,8 @@ def test_a_parameter_compared_on_its_key_quantity_stays_compared_when_another_qu
     """ego_speed sets the ego's speed the same way in both scripts (compared, inside); the drifter's speed the new
     script computes otherwise cannot be compared: it is listed, and it does not make the ego's speed a key parameter
     the judge could not compare."""
-    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     generated = _SLOWER_PARENT.replace("globalParameters.ego_speed - globalParameters.slower_by", speed)
     failing = {"ego_speed": 20.0, "slower_by": 3.0, "gap": 6.0}
@@ -1631,7 +1657,7 @@ def test_a_parameter_compared_on_its_key_quantity_stays_compared_when_another_qu
     compared = compare_parameters(failing, generated, parent=_SLOWER_PARENT, interaction=interaction)
     assert "ego_speed" in compared["compared"] and compared["key_not_compared"] == {}
     assert "the Car drifter's speed" in compared["quantities_not_compared"]["ego_speed"]
-    assert _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3) == []
+    assert judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3) == []
     # the ego's own speed moved: outside, whatever the drifter
     moved = generated.replace("param ego_speed = Range(18, 25)", "param ego_speed = Range(30, 35)")
     outside = compare_parameters(failing, moved, parent=_SLOWER_PARENT, interaction=interaction)
@@ -1657,16 +1683,18 @@ def test_a_variable_computed_from_a_parameter_is_followed_like_an_expression(ass
 def test_each_bank_scenario_judged_against_itself_compares_every_parameter():
     """The judge on a shipped scenario and itself (failing values in the middle of each range): every parameter is
     compared, none outside, no rejection, whatever the key actor."""
-    from dv2s_gym.mining.convert import _judge, _script_ranges, compare_parameters
+    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion_ranges import script_ranges
 
     bank = Bank()
     for name in sorted(bank.names()):
         script = bank.get(name).script
-        failing = {p: (low + high) / 2 for p, (low, high) in _script_ranges(script).items()}
+        failing = {p: (low + high) / 2 for p, (low, high) in script_ranges(script).items()}
         compared = compare_parameters(failing, script, parent=script)
         assert compared["not_comparable"] == {} and compared["outside"] == [], name
         assert len(compared["compared"]) == len(failing), name
-        assert _judge({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3) == [], name
+        assert judge_conversion({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3) == [], name
 
 
 @pytest.mark.parametrize("expression", ["(globalParameters.g + 1e16) - 1e16", "globalParameters.g + 1e400",
@@ -1688,7 +1716,7 @@ def test_a_distance_along_the_lane_is_read_only_from_the_egos_point(reference, c
     """``pointAlongBy(egoS + g)`` places the actor ``g`` ahead of the ego (the ego is at ``pointAlongBy(egoS)``);
     from another point (``otherS + g``) or from the lane's start (``g``) the same number is another distance: the
     judge does not read it as the parent's distance from the ego (the key quantity is then not comparable)."""
-    from dv2s_gym.mining.convert import compare_parameters
+    from dv2s_gym.mining.conversion_parameters import compare_parameters
 
     parent = ("param lead_gap = Range(10, 20)\negoS = Range(50, 400)\notherS = Range(0, 600)\n"
               "ego = new Car at lane.centerline.pointAlongBy(egoS)\n"

@@ -90,7 +90,8 @@ def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
 
 
 def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(tmp_path):
-    from dv2s_gym.mining.convert import convert_failure, replay_failure_entry
+    from dv2s_gym.mining.conversion_replay import replay_failure_entry
+    from dv2s_gym.mining.convert import convert_failure
 
     run = tmp_path / "run"
     run.mkdir()

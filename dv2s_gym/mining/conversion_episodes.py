@@ -28,6 +28,7 @@ from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline.semantics.trace import trace_actor_kind
 from policies.evaluation import run_episode
 from policies.registry import load_policy
+from scenario_bank.records import EpisodeRecord
 
 __all__ = ["same_failure_class", "reference_failed", "reference_passed", "reference_outcome", "reproduction_seeds",
            "detected_failure", "monitor_options", "policy_name", "video_settings", "reproduce", "clip_episode",
@@ -57,20 +58,21 @@ def reference_failed(source: Mapping[str, Any], reference_failure: Optional[Mapp
     return not reference_avoids(dict(source), dict(reference_failure))
 
 
-def reference_passed(record: Mapping[str, Any]) -> bool:
-    """Whether the reference driver passed the failing scene of mined episode ``record`` by the rule a conversion's
+def reference_passed(record: EpisodeRecord) -> bool:
+    """Whether the reference driver passed the failing scene of mined episode ``record`` (an
+    :class:`~scenario_bank.records.EpisodeRecord`, or its JSON object as ``episodes.jsonl`` holds it) by the rule a conversion's
     avoidability uses on its new scenario (:func:`reference_failed`: any collision, off-road
     or stall of the reference counts, and a near miss unless the policy's failure was worse). The miner's
     ``avoidable`` flag is looser (a reference outcome less severe than the policy's failure, such as a stall where
     the policy came too close, counts as avoided), but the loop counts every failure of the held-out monitors, so an
     exact replay is kept only of a scene the reference driver passed. A record whose reference episode did not run
     (no reference driver) keeps the miner's flag."""
-    if record.get("avoidable") is False:
+    record = EpisodeRecord.from_dict(record)
+    if record.avoidable is False:
         return False
-    reference = record.get("reference")
-    if not reference:
+    if not record.reference:
         return True
-    return not reference_failed(dict(record.get("failure") or {}), reference.get("failure"))
+    return not reference_failed(dict(record.failure or {}), record.reference.get("failure"))
 
 
 def reference_outcome(source: Mapping[str, Any], episodes: List[Mapping[str, Any]], reference: str) -> Dict[str, Any]:

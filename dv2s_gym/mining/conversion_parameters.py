@@ -294,11 +294,11 @@ def _tied_twice(parent: str, script: str, compared: Dict[str, Any]) -> Dict[str,
     return why
 
 
-def parent_script(record: Mapping[str, Any], bank_dir: Optional[PathLike]) -> Optional[str]:
-    """The script of the bank scenario the failure ran (``None`` when it cannot be read: the judge then compares by
-    name only)."""
+def parent_script(scenario: str, bank_dir: Optional[PathLike]) -> Optional[str]:
+    """The script of ``scenario``, the bank scenario the failure ran, in the bank in ``bank_dir`` (default the shipped
+    bank); ``None`` when it cannot be read: the judge then compares by name only."""
     try:
-        return (Bank(bank_dir) if bank_dir else Bank()).get(record["scenario"]).script
+        return (Bank(bank_dir) if bank_dir else Bank()).get(scenario).script
     except (BankError, OSError):  # the comparison by meaning is an addition; without the parent, names only
         return None
 

@@ -24,6 +24,10 @@ when the endpoint works, rather than rejecting every cluster."""
 
 
 class ConversionRejected(MiningError):
+    """A failure's conversion rejected at ``stage`` (``"video"``, ``"check"``, ``"reproduction"``...) with ``message``;
+    its text is the record's ``reason``, ``"<stage>: <message>"``. The conversion records it and never raises it to
+    its caller."""
+
     def __init__(self, stage: str, message: str) -> None:
         super().__init__(f"{stage}: {message}")
         self.stage, self.message = stage, message

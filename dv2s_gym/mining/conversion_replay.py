@@ -25,7 +25,7 @@ from dv2s_gym.pipeline.metrics import e2e_sc
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from scenario_bank.bank import Bank, DuplicateScenarioError
 from scenario_bank.errors import NearDuplicateWarning
-from scenario_bank.records import Provenance, Sidecar
+from scenario_bank.records import EpisodeRecord, Provenance, Sidecar
 
 __all__ = ["replay_failure_entry", "add_replay", "replay_without_video", "ReplaySource", "link_entries"]
 
@@ -50,8 +50,7 @@ class ReplaySource:
     files: Optional[Mapping[str, Path]] = None
 
 
-def add_replay(record: Mapping[str, Any], bank, settings: ConversionSettings, source: ReplaySource
-                ) -> Dict[str, Any]:
+def add_replay(record: EpisodeRecord, bank, settings: ConversionSettings, source: ReplaySource) -> Dict[str, Any]:
     """Add the exact replay of the failing scene to ``bank`` (:mod:`dv2s_gym.mining.exact_replay`): the parent
     script (in the settings' ``bank_dir``) narrowed around the failing parameters, checked to replay the recorded
     episode step for step with the settings' ``policy``, ``env_config`` and ``monitor``.
@@ -64,15 +63,15 @@ def add_replay(record: Mapping[str, Any], bank, settings: ConversionSettings, so
     without an ``interaction`` it is read from that trace. A scene the reference driver failed too
     (:func:`~dv2s_gym.mining.conversion_episodes.reference_passed`) is not replayed: ``{"entry": None, "note", "not_narrowed": {}}``."""
     if not reference_passed(record):
-        failed = ((record.get("reference") or {}).get("failure") or {}).get("type") or "not avoided"
+        failed = ((record.reference or {}).get("failure") or {}).get("type") or "not avoided"
         return {"entry": None, "not_narrowed": {}, "note": f"no replay entry: the reference driver failed this scene "
                                                           f"too ({failed}), so it is no failure the policy could have "
                                                           "avoided"}
-    parent = (Bank(settings.bank_dir) if settings.bank_dir else Bank()).get(record["scenario"])
-    params = dict(record.get("params") or {})
+    parent = (Bank(settings.bank_dir) if settings.bank_dir else Bank()).get(record.scenario)
+    params = dict(record.params or {})
     script, intervals, not_narrowed, trace, failure, source = _run_narrowed(record, parent, params, settings, source)
-    replay = {"params": params, "intervals": intervals, "not_narrowed": not_narrowed, "seed": int(record["seed"]),
-              "trajectory_hash": record["result"]["trajectory_hash"],
+    replay = {"params": params, "intervals": intervals, "not_narrowed": not_narrowed, "seed": int(record.seed),
+              "trajectory_hash": record.result["trajectory_hash"],
               "policy": policy_name(settings.policy), **replay_versions(settings.policy)}
     out = {"entry": None, **replay, "failure": failure, "note": None,
            "e2e_sc": e2e_sc(elements_from_trace(source.source_trace), elements_from_trace(trace))}
@@ -80,21 +79,21 @@ def add_replay(record: Mapping[str, Any], bank, settings: ConversionSettings, so
     return out
 
 
-def _run_narrowed(record: Mapping[str, Any], parent: Any, params: Dict[str, Any], settings: ConversionSettings,
+def _run_narrowed(record: EpisodeRecord, parent: Any, params: Dict[str, Any], settings: ConversionSettings,
                   source: ReplaySource) -> tuple:
     """Write the parent narrowed around the failing ``params`` and replay the recorded episode on it:
     ``(script, intervals, not_narrowed, trace, failure, source)``, ``source`` completed from the replay when it had no trace.
     A replay that diverges is a ``replay`` rejection."""
     script, intervals, not_narrowed = narrowed_script(parent.script, params)
-    seed = int(record["seed"])
-    expected = record["result"]["trajectory_hash"]
-    folder = source.run_dir / "failures" / cluster_slug(source.cluster, record.get("index")) / CONVERSION_DIR
+    seed = int(record.seed)
+    expected = record.result["trajectory_hash"]
+    folder = source.run_dir / "failures" / cluster_slug(source.cluster, record.index) / CONVERSION_DIR
     path = folder / "replay.scenic"
     write_run_file(path, script)
     result, trace, failure = run_replay(path, policy=settings.policy, seed=seed, params=params,
                                         env_config=settings.env_config, monitor=settings.monitor)
     if result.trajectory_hash != expected:
-        raise ConversionRejected("replay", f"the parent {record['scenario']!r} narrowed around the failing parameters does not "
+        raise ConversionRejected("replay", f"the parent {record.scenario!r} narrowed around the failing parameters does not "
                                   f"replay the failing episode (trajectory hash {result.trajectory_hash[:12]} != "
                                   f"recorded {expected[:12]})")
     if source.source_trace is None:  # the same episode step for step: its trace is the failure's own
@@ -110,7 +109,7 @@ def _run_narrowed(record: Mapping[str, Any], parent: Any, params: Dict[str, Any]
     return script, intervals, not_narrowed, trace, failure, source
 
 
-def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: Any, script: str,
+def _bank_replay(out: Dict[str, Any], record: EpisodeRecord, bank, parent: Any, script: str,
                  replay: Mapping[str, Any], settings: ConversionSettings, source: ReplaySource) -> None:
     """Add the narrowed script to ``bank`` as the failure's exact replay entry (``out["entry"]``), or say in
     ``out["note"]`` why there is none."""
@@ -122,15 +121,15 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
                    f"parameters narrowed around the failing values"
                    + (f" (not narrowed, drawn as in the parent: {', '.join(sorted(replay.get('not_narrowed') or {}))})"
                       if replay.get("not_narrowed") else "") + "." + (f" {events}" if events else ""))
-    provenance = Provenance(kind="mined", parent=record["scenario"], seed=seed, params=params,
+    provenance = Provenance(kind="mined", parent=record.scenario, seed=seed, params=params,
                             video=ENTRY_VIDEO if ENTRY_VIDEO in files else None,
                             trace=ENTRY_TRACE if ENTRY_TRACE in files else None, generator="exact replay",
                             policy=policy_name(policy), failure=dict(source_failure), cluster=source.cluster,
-                            run=str(source.run_dir.resolve()), index=record.get("index"),
+                            run=str(source.run_dir.resolve()), index=record.index,
                             interaction=FailureInteraction.from_dict(source.interaction).to_dict(),
                             replay=dict(replay), e2e_sc=out["e2e_sc"],
                             date=datetime.date.today().isoformat())
-    base = replay_name(record["scenario"], source_failure["type"])
+    base = replay_name(record.scenario, source_failure["type"])
     name, n = base, 2
     while name in bank:
         name, n = f"{base}_{n}", n + 1
@@ -145,19 +144,21 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
         existing = bank.get(error.existing).source.replay or {}
         if existing.get("seed") == seed and existing.get("params") == params:
             out["entry"] = error.existing  # this failing scene is in the bank already (a resumed run)
-        elif error.existing == record["scenario"]:
-            out["note"] = (f"no replay entry: {record['scenario']!r} has no free parameters to narrow, so the failing "
+        elif error.existing == record.scenario:
+            out["note"] = (f"no replay entry: {record.scenario!r} has no free parameters to narrow, so the failing "
                            f"scene is that scenario itself with seed {seed}")
         else:
             out["note"] = f"no replay entry: {error}"
 
 
-def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, settings: ConversionSettings, *, bank: Any,
+def replay_failure_entry(record: EpisodeRecord, run_dir: PathLike, settings: ConversionSettings, *, bank: Any,
                          cluster: Optional[str] = None) -> Dict[str, Any]:
     """Keep one failure exactly, without converting it: only the exact replay entry of the failing scene
     (stage 3 of :func:`~dv2s_gym.mining.convert.convert_failure`, with no video, description or script; the entry keeps the replay's
     trace). Never raises for a bad failure; raises ``WrongTypeError`` when ``settings`` is not a
-    :class:`ConversionSettings` with a policy.
+    :class:`ConversionSettings` with a policy, and :class:`~scenario_bank.records.RecordError` when ``record`` (an
+    :class:`~scenario_bank.records.EpisodeRecord`, or its JSON object as ``episodes.jsonl`` holds it) is no episode
+    record.
 
     Of ``settings`` the replay reads the ``policy`` that failed, the run's ``env_config``, the ``bank_dir`` holding
     the record's scenario (default the ``bank`` when it holds it, else the shipped bank) and the ``monitor``
@@ -171,18 +172,19 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, settings:
     check_settings(settings, "replay_failure_entry")
     start = time.perf_counter()
     run_dir = Path(run_dir)
-    cluster = cluster if cluster is not None else record.get("cluster")
-    out: Dict[str, Any] = {"cluster": cluster, "index": record.get("index"), "scenario": record.get("scenario"),
+    record = EpisodeRecord.from_dict(record)
+    cluster = cluster if cluster is not None else record.extra.get("cluster")
+    out: Dict[str, Any] = {"cluster": cluster, "index": record.index, "scenario": record.scenario,
                            "status": "rejected", "replay_entry": None, "reason": None, "note": None, "seconds": None}
     try:
-        failure = dict(record.get("failure") or {})
+        failure = dict(record.failure or {})
         if not failure.get("type"):
             raise ConversionRejected("input", "the record holds no failure (record['failure'] is empty)")
-        if not (record.get("result") or {}).get("trajectory_hash"):
+        if not (record.result or {}).get("trajectory_hash"):
             raise ConversionRejected("input", "the record holds no trajectory hash to check the replay against")
         if isinstance(bank, (str, os.PathLike)):
             bank = Bank(bank)
-        if settings.bank_dir is None and getattr(bank, "root", None) is not None and record.get("scenario") in bank:
+        if settings.bank_dir is None and getattr(bank, "root", None) is not None and record.scenario in bank:
             settings = settings.replace(bank_dir=bank.root)
         settings = settings.replace(monitor=monitor_options(run_dir, settings.monitor))
         replay = add_replay(record, bank, settings, ReplaySource(failure, cluster, run_dir))
@@ -201,7 +203,7 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, settings:
     return out
 
 
-def replay_without_video(out: Dict[str, Any], video_error: str, record: Mapping[str, Any], bank,
+def replay_without_video(out: Dict[str, Any], video_error: str, record: EpisodeRecord, bank,
                           details: Dict[str, Any], settings: ConversionSettings, source: ReplaySource) -> None:
     """After the video stage failed: keep the exact replay all the same (its own trace stands for the failure's)
     and record both outcomes in ``out``: ``rejections`` holds the video's reason, then the replay's if it

@@ -91,7 +91,7 @@ from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.bank import Bank
-from scenario_bank.records import Provenance, Sidecar
+from scenario_bank.records import EpisodeRecord, Provenance, Sidecar
 
 __all__ = ["convert_failure", "replay_failure_entry"]
 
@@ -122,12 +122,13 @@ def _mined_name(parent: str, failure_type: str) -> str:
     return base[:90] or "mined"
 
 
-def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: ConversionSettings, *,
+def convert_failure(record: EpisodeRecord, run_dir: PathLike, settings: ConversionSettings, *,
                     bank: Any, cluster: Optional[str] = None) -> Dict[str, Any]:
     """Turn one failure record into a bank entry; returns the conversion record (never raises for a bad failure).
 
     Args:
-        record: an episode record of the miner with a ``failure`` (see the mining contract).
+        record: an episode record of the miner with a ``failure`` (see the mining contract): an
+            :class:`~scenario_bank.records.EpisodeRecord`, or its JSON object as ``episodes.jsonl`` holds it.
         run_dir: the mining run folder; files go to ``failures/<cluster slug>/`` (``failure.webm``,
             ``trace.json.gz``, ``conversion/{description.txt, elements.json, scenario.scenic, report.json}``).
         settings: the :class:`ConversionSettings` (the policy that failed, the backends, the reproduction check,
@@ -135,7 +136,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: Conv
             and ``after`` after it (a stall's clip covers the stall, up to the monitor's ``stall_seconds``, between
             them: :func:`~dv2s_gym.mining.failure_video.write_failure_video`).
         bank: the bank to add to (a :class:`~scenario_bank.bank.Bank` or its folder).
-        cluster: the failure's cluster id (default ``record["cluster"]``).
+        cluster: the failure's cluster id (default the record's ``cluster`` key, which the miner adds).
 
     Raises the model backends' setup errors (:data:`~dv2s_gym.mining.conversion_rejection.SETUP_ERRORS`), and ``WrongTypeError`` (a ``TypeError``)
     for settings that are not a :class:`ConversionSettings` or name no policy; every other problem is a rejection.
@@ -151,21 +152,21 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: Conv
     the first one is ``reason``).
     """
     check_settings(settings, "convert_failure")
-    return _Conversion(record, Path(run_dir), settings, bank, cluster).run()
+    return _Conversion(EpisodeRecord.from_dict(record), Path(run_dir), settings, bank, cluster).run()
 
 
 class _Conversion:
     """One run of :func:`convert_failure`: its stages in order (each a method, timed), the record being built
     (``out``) and what goes only into ``report.json`` (``details``)."""
 
-    def __init__(self, record: Mapping[str, Any], run_dir: Path, settings: ConversionSettings, bank: Any,
+    def __init__(self, record: EpisodeRecord, run_dir: Path, settings: ConversionSettings, bank: Any,
                  cluster: Optional[str]) -> None:
         self.record, self.run_dir, self.settings, self.bank = record, run_dir, settings, bank
-        self.cluster = cluster if cluster is not None else record.get("cluster")
-        self.folder = run_dir / "failures" / cluster_slug(self.cluster, record.get("index"))
+        self.cluster = cluster if cluster is not None else record.extra.get("cluster")
+        self.folder = run_dir / "failures" / cluster_slug(self.cluster, record.index)
         self.conversion = self.folder / CONVERSION_DIR
         self.out: Dict[str, Any] = {
-            "cluster": self.cluster, "index": record.get("index"), "status": "rejected", "reason": None,
+            "cluster": self.cluster, "index": record.index, "status": "rejected", "reason": None,
             "stage": None, "video": None, "description": None, "script": None, "reproduction": None,
             "e2e_sc": None, "bank_entry": None, "merged_into": None, "seconds": None, "timings": {},
             "interaction": None, "replay_entry": None, "avoidability": None, "rejections": [], "actors": None,
@@ -209,7 +210,7 @@ class _Conversion:
 
     def _input(self) -> None:
         self.stage = "input"
-        self.source_failure = dict(self.record.get("failure") or {})
+        self.source_failure = dict(self.record.failure or {})
         k, threshold = self.settings.k, self.settings.threshold
         if not self.source_failure.get("type"):
             raise ConversionRejected("input", "the record holds no failure (record['failure'] is empty)")
@@ -219,7 +220,7 @@ class _Conversion:
         if isinstance(self.bank, (str, os.PathLike)):
             self.bank = Bank(self.bank)
         if (self.settings.bank_dir is None and getattr(self.bank, "root", None) is not None
-                and self.record.get("scenario") in self.bank):
+                and self.record.scenario in self.bank):
             self.settings = self.settings.replace(bank_dir=self.bank.root)
         self.conversion.mkdir(parents=True, exist_ok=True)
 
@@ -299,7 +300,7 @@ class _Conversion:
 
 
         check = check_scenario(self.generation.script, seed=self.settings.seed,
-                               name=f"mined failure {self.record.get('index')}", in_process=False)
+                               name=f"mined failure {self.record.index}", in_process=False)
         self.details["check"] = {**asdict(check), "ok": check.ok}
         self.lap("check")
         if not check.ok:
@@ -312,7 +313,7 @@ class _Conversion:
         self.stage = "reproduction"
 
         episodes, self.traces = reproduce(self.script_path, self.settings.policy, self.settings,
-                                           int(self.record["seed"]), self.source_failure, self.interaction)
+                                           int(self.record.seed), self.source_failure, self.interaction)
         self.reproduced = sum(e["reproduced"] for e in episodes)
         self.shown = sum(bool(e["interaction"]) for e in episodes)
         low, high = wilson_interval(self.reproduced, len(episodes))
@@ -327,7 +328,7 @@ class _Conversion:
         self.stage = "avoidability"
         reference = self.settings.reference
         if reference:
-            reference_episodes, _ = reproduce(self.script_path, reference, self.settings, int(self.record["seed"]),
+            reference_episodes, _ = reproduce(self.script_path, reference, self.settings, int(self.record.seed),
                                                self.source_failure)
             self.out["avoidability"] = reference_outcome(self.source_failure, reference_episodes,
                                                          policy_name(reference))
@@ -349,9 +350,9 @@ class _Conversion:
         out, record = self.out, self.record
         out["actors"] = compare_actors(actor_census(self.source_trace), [actor_census(t) for t in self.traces],
                                        self.interaction.kind)
-        out["parameters"] = compare_parameters((record.get("result") or {}).get("params") or record.get("params")
-                                               or {}, self.generation.script,
-                                               parent=parent_script(record, self.settings.bank_dir),
+        out["parameters"] = compare_parameters((record.result or {}).get("params") or record.params or {},
+                                               self.generation.script,
+                                               parent=parent_script(record.scenario, self.settings.bank_dir),
                                                interaction=self.interaction)
         # the judge: every check that failed is recorded; the first one is the rejection's stage
         rejections = judge_conversion(out, self.interaction, self.source_failure, self.settings.threshold)
@@ -399,11 +400,11 @@ class _Conversion:
         if self.clip_path is not None:
             files[ENTRY_CONVERTED_VIDEO] = self.clip_path
         fields = Sidecar(description=self.description.text,
-                         name=_mined_name(record["scenario"], self.source_failure["type"]),
+                         name=_mined_name(record.scenario, self.source_failure["type"]),
                          elements=self.description.elements, tags=("mined", self.source_failure["type"]),
                          source=self._provenance())
         outcome = self.bank.add(self.generation.script, fields, files=files, on_duplicate="merge",
-                                near_copy_of=_family(record["scenario"], self.source_failure["type"]))
+                                near_copy_of=_family(record.scenario, self.source_failure["type"]))
         if outcome.status == "added":
             out.update(status="kept", bank_entry=outcome.entry.name)
         else:
@@ -415,16 +416,16 @@ class _Conversion:
     def _provenance(self) -> Provenance:
         """The kept script's ``mined`` provenance."""
         out, record, s = self.out, self.record, self.settings
-        result = record.get("result") or {}
+        result = record.result or {}
         return Provenance(
-            kind="mined", parent=record["scenario"], seed=int(record["seed"]),
-            params=_portable_params(result.get("params") or record.get("params") or {}),
+            kind="mined", parent=record.scenario, seed=int(record.seed),
+            params=_portable_params(result.get("params") or record.params or {}),
             video=ENTRY_VIDEO, trace=ENTRY_TRACE,
             **conversion_provenance(s.dra, s.sg, self.generation, self.description),
             backends={"dra": s.dra, "sg": s.sg},
             policy=policy_name(s.policy), failure=self.source_failure, cluster=self.cluster,
             reproduction=out["reproduction"], e2e_sc=out["e2e_sc"], run=str(self.run_dir.resolve()),
-            index=record.get("index"),
+            index=record.index,
             interaction=self.interaction.to_dict(), judge={"avoidability": out.get("avoidability"),
                                                  "interaction_shown": self.shown, "reproduced": self.reproduced,
                                                  "parameters_not_compared": dict(

@@ -98,7 +98,7 @@ from __future__ import annotations
 import json
 import os
 import re
-from dv2s_gym.mining.convert import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
+from dv2s_gym.mining.conversion_files import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
 from dv2s_gym.mining.errored import merged_messages, messages_text
 from dv2s_gym.mining.loop_record import (
     HeldOutComparison, MinedEntry, MiningSummary, ReferenceGate, RegressSummary, RoundRecord, RoundSteps, SplitRecord,

@@ -52,7 +52,10 @@ from tqdm.auto import tqdm
 from dv2s_gym.mining import space as space_module
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
 from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.convert import cluster_slug, CONVERSION_DIR, convert_failure, reference_passed, SETUP_ERRORS
+from dv2s_gym.mining.conversion_episodes import reference_passed
+from dv2s_gym.mining.conversion_files import cluster_slug, CONVERSION_DIR
+from dv2s_gym.mining.conversion_rejection import SETUP_ERRORS
+from dv2s_gym.mining.convert import convert_failure
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family

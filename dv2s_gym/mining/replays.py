@@ -18,7 +18,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from dv2s_gym.mining import convert
 from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.convert import reference_passed
+from dv2s_gym.mining.conversion_episodes import reference_passed
 from dv2s_gym.mining.cluster import group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family
@@ -42,7 +42,7 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     at most ``max_replays`` rows in ``replays.jsonl`` (``None``: every cluster), the clusters taken round-robin over
     the families (:func:`replay_order`). The representative failure is the
     one the conversion would take (lowest robustness, then lowest index). Returns every row of the run's
-    ``replays.jsonl`` (:func:`dv2s_gym.mining.convert.replay_failure_entry`'s records)."""
+    ``replays.jsonl`` (:func:`dv2s_gym.mining.conversion_replay.replay_failure_entry`'s records)."""
     run_dir = Path(run_dir)
     settings = read_run_settings(run_dir)
     if settings is None:
@@ -66,8 +66,7 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     bar = progress_bar(progress, len(todo), 0, desc="exact replays")
     try:
         for cluster, record in todo:
-            row = convert.replay_failure_entry(dict(record, cluster=cluster), run_dir, replay, bank=bank,
-                                               cluster=cluster)
+            row = convert.replay_failure_entry(record, run_dir, replay, bank=bank, cluster=cluster)
             appender.append(row)
             existing.append(row)
             if bar is not None:
@@ -123,8 +122,9 @@ def replay_entries(run_dir: os.PathLike | str) -> List[MinedEntry]:
         parent = row.get("scenario")
         if not parent:  # conversion rows do not name the parent: the failing episode does
             if episodes is None:
-                episodes = {r.get("index"): r for r in read_records(run_dir / "episodes.jsonl")}
-            parent = (episodes.get(row.get("index")) or {}).get("scenario")
+                episodes = {r.index: r for r in read_records(run_dir / "episodes.jsonl")}
+            episode = episodes.get(row.get("index"))
+            parent = episode.scenario if episode is not None else None
         # not_narrowed: parameters the replay leaves at the parent's distribution, with why
         found[name] = MinedEntry(cluster=str(row.get("cluster")), scenario=name, parent=parent, reproduction=None,
                                  replay=True, not_narrowed=dict(row["replay_not_narrowed"])
