@@ -47,7 +47,7 @@ def judged(new_script: str, parent: str = PARENT, failing=None):
     """The parameter comparison and the judge's rejections of ``new_script`` as a conversion of the failure."""
     parameters = compare_parameters(failing or FAILING, new_script, parent, INTERACTION)
     rejections = judge_conversion({"reproduction": REPRODUCED, "parameters": parameters}, INTERACTION,
-                        {"type": "collision", "with_kind": "car"}, 0.3)
+                                  {"type": "collision", "with_kind": "car"}, 0.3)
     return parameters, [str(r) for r in rejections]
 
 

@@ -518,7 +518,7 @@ def test_the_judge_rejects_a_script_whose_actors_or_parameter_ranges_are_not_the
     outside = compare_parameters({"ego_speed": 12.5, "cut_gap": 3.2}, script)
     assert outside["outside"] == ["cut_gap", "ego_speed"]
     reasons = [str(r) for r in judge_conversion({**passing, "actors": no_adversary, "parameters": outside}, interaction,
-                                      failure, 0.3)]
+                                                failure, 0.3)]
     assert reasons == ["actors: the failure's scene has 2 actors (car 1, pedestrian 1), the new scenario's 1 actor "
                        "(pedestrian 1): the failure's adversary, a car, is missing",
                        "parameters: the new scenario's ranges do not contain the failing values: cut_gap = 3.2 "
@@ -713,7 +713,7 @@ def test_the_judge_compares_parameter_names_without_case_and_never_prints_an_out
         "outside 5..10"]
     below = compare_parameters({"gap": 5.0000001}, "param gap = Range(5.0000002, 9)\n")
     assert "gap = 5.0000001 outside 5.0000002..9" in str(judge_conversion({**passing, "parameters": below}, {},
-                                                                {"type": "collision"}, 0.3)[0])
+                                                                          {"type": "collision"}, 0.3)[0])
 
 
 # --------------------------------------------------------------------------- the parameters, compared by meaning

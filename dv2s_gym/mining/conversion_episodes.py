@@ -60,8 +60,8 @@ def reference_failed(source: Mapping[str, Any], reference_failure: Optional[Mapp
 
 def reference_passed(record: EpisodeRecord) -> bool:
     """Whether the reference driver passed the failing scene of mined episode ``record`` (an
-    :class:`~scenario_bank.records.EpisodeRecord`, or its JSON object as ``episodes.jsonl`` holds it) by the rule a conversion's
-    avoidability uses on its new scenario (:func:`reference_failed`: any collision, off-road
+    :class:`~scenario_bank.records.EpisodeRecord`, or its JSON object as ``episodes.jsonl`` holds it) by the rule a
+    conversion's avoidability uses on its new scenario (:func:`reference_failed`: any collision, off-road
     or stall of the reference counts, and a near miss unless the policy's failure was worse). The miner's
     ``avoidable`` flag is looser (a reference outcome less severe than the policy's failure, such as a stall where
     the policy came too close, counts as avoided), but the loop counts every failure of the held-out monitors, so an
@@ -97,7 +97,8 @@ def reproduction_seeds(record_seed: int, k: int, seed: int = 0) -> List[int]:
     return [int(s) & 0x7FFFFFFF for s in state]
 
 
-def detected_failure(result, trace, options: Union[MonitorSettings, Mapping[str, Any], None]) -> Optional[Dict[str, Any]]:
+def detected_failure(result, trace, options: Union[MonitorSettings, Mapping[str, Any], None]
+                     ) -> Optional[Dict[str, Any]]:
     """The episode's failure as a dict (the miner's monitors, :func:`dv2s_gym.mining.monitors.detect_failure`)."""
     found = detect_failure(result, trace, MonitorSettings.of(options))
     return None if found is None else found.to_json()
@@ -128,8 +129,8 @@ def video_settings(settings: ConversionSettings) -> VideoSettings:
 
 
 def reproduce(script_path: Path, policy: Any, settings: ConversionSettings, record_seed: int,
-               source_failure: Mapping[str, Any], interaction: Optional[Mapping[str, Any]] = None
-               ) -> Tuple[List[Dict[str, Any]], List[Any]]:
+              source_failure: Mapping[str, Any], interaction: Optional[Mapping[str, Any]] = None
+              ) -> Tuple[List[Dict[str, Any]], List[Any]]:
     """Run ``policy`` on the new scenario over the settings' ``k`` seeds derived from ``record_seed`` (with the
     settings' ``env_config`` and ``monitor``); per episode its seed, failure, the kind of
     the actor its failure involved (``actor_kind``, :func:`~dv2s_gym.mining.interaction.key_actor`), whether it

@@ -26,8 +26,8 @@ reason (``"key_not_compared"``, :func:`_key_not_compared`). Within the share may
 actors (traffic beside the interaction), and key quantities the new script fixes without a parameter of its own or
 leaves out (a generated script parameterises a scene its own way: the rule-based generator leaves most behaviour
 timings fixed), as long as a fixed key quantity holds the failing value (``"key_fixed_outside"``,
-:func:`~dv2s_gym.mining.conversion_keys.key_fixed_outside`); a key actor's placement the new script writes in a form the judge cannot read is a
-rejection (``"key_unread"``, :func:`~dv2s_gym.mining.conversion_keys.key_placement_unread`)."""
+:func:`~dv2s_gym.mining.conversion_keys.key_fixed_outside`); a key actor's placement the new script writes in a form the
+judge cannot read is a rejection (``"key_unread"``, :func:`~dv2s_gym.mining.conversion_keys.key_placement_unread`)."""
 
 
 _KEY_REJECTIONS = (
@@ -37,40 +37,43 @@ _KEY_REJECTIONS = (
     ("key_unread", "is placed by another quantity or form, from which the judge cannot read it, so the failing value "
                    "is not checked"),
 )
-"""The key-parameter findings of :func:`~dv2s_gym.mining.conversion_parameters.compare_parameters` that reject a conversion, each with what is wrong, in the
-order the rejection reasons list them."""
+"""The key-parameter findings of :func:`~dv2s_gym.mining.conversion_parameters.compare_parameters` that reject a
+conversion, each with what is wrong, in the order the rejection reasons list them."""
 
 
 def judge_conversion(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failure: Mapping[str, Any],
-           threshold: float) -> List[ConversionRejected]:
+                     threshold: float) -> List[ConversionRejected]:
     """The checks a converted script must pass, each failing one a rejection with its own stage:
     ``interaction`` (its runs show the failure's actor doing its manoeuvre), ``reproduction`` (the policy
     fails the same way with the same kind of actor), ``avoidability`` (the reference driver drives most
     episodes without any collision, off-road or stall), ``actors`` (the script's actors are the failure's, kind
-    for kind: none missing, the adversary above all, none added; ``out["actors"]``, :func:`~dv2s_gym.mining.conversion_episodes.compare_actors`) and
-    ``parameters`` (the script's ranges of the failure's parameters contain the failing values;
-    ``out["parameters"]``, :func:`~dv2s_gym.mining.conversion_parameters.compare_parameters`)."""
+    for kind: none missing, the adversary above all, none added; ``out["actors"]``,
+    :func:`~dv2s_gym.mining.conversion_episodes.compare_actors`) and ``parameters`` (the script's ranges of the
+    failure's parameters contain the failing values; ``out["parameters"]``,
+    :func:`~dv2s_gym.mining.conversion_parameters.compare_parameters`)."""
     found: List[ConversionRejected] = []
     repro = out["reproduction"]
     k = repro["k"]
     what = f"{interaction.get('kind')} ({', '.join(interaction.get('manoeuvres') or []) or 'no manoeuvre'})"
     if interaction.get("kind") and repro["interaction_shown"] / k < threshold:
         found.append(ConversionRejected("interaction", f"the new scenario's runs show the failure's {what} in "
-                                              f"{repro['interaction_shown']} of {k} episodes "
-                                              f"(share {repro['interaction_shown'] / k:.2f} < threshold {threshold:g})"))
+                                                       f"{repro['interaction_shown']} of {k} episodes (share "
+                                                       f"{repro['interaction_shown'] / k:.2f} < threshold "
+                                                       f"{threshold:g})"))
     if repro["rate"] < threshold:
         with_kind = f" with a {interaction['kind']}" if interaction.get("kind") else ""
-        found.append(ConversionRejected("reproduction", f"the new scenario reproduced the {source_failure['type']} failure"
-                                               f"{with_kind} in {repro['reproduced']} of {k} episodes "
-                                               f"(rate {repro['rate']:.2f} < threshold {threshold:g})"))
+        found.append(ConversionRejected("reproduction", f"the new scenario reproduced the {source_failure['type']} "
+                                                        f"failure{with_kind} in {repro['reproduced']} of {k} episodes "
+                                                        f"(rate {repro['rate']:.2f} < threshold {threshold:g})"))
     avoid = out.get("avoidability")
     if avoid and not avoid["avoided_rate"] > 0.5:
         classes = ", ".join(f"{label} {n}" for label, n in (avoid.get("failures") or {}).items())
         found.append(ConversionRejected("avoidability", f"the reference driver {avoid['reference']} failed in "
-                                               f"{avoid['failed']} of {avoid['k']} episodes of the new scenario"
-                                               + (f" ({classes})" if classes else "")
-                                               + "; it must drive most of them without any collision, "
-                                                 "off-road or stall"))
+                                                        f"{avoid['failed']} of {avoid['k']} episodes of the new "
+                                                        f"scenario"
+                                                        + (f" ({classes})" if classes else "")
+                                                        + "; it must drive most of them without any collision, "
+                                                          "off-road or stall"))
     actors = out.get("actors")
     if actors and not actors.get("same"):
         adversary = actors.get("adversary")
@@ -83,14 +86,16 @@ def judge_conversion(out: Mapping[str, Any], interaction: Mapping[str, Any], sou
         if not problems and actors.get("runs") and 2 * actors.get("runs_matching", 0) <= actors["runs"]:
             problems.append(f"the failure's actors, kind for kind, in only {actors['runs_matching']} of "
                             f"{actors['runs']} runs (a majority needed)")
-        found.append(ConversionRejected("actors", f"the failure's scene has {_census_text(actors['failure'])}, the new "
-                                         f"scenario's {_census_text(actors['script'])}: {', '.join(problems)}"))
+        found.append(ConversionRejected("actors", f"the failure's scene has {_census_text(actors['failure'])}, the "
+                                                  f"new scenario's {_census_text(actors['script'])}: "
+                                                  f"{', '.join(problems)}"))
     parameters = out.get("parameters")
     for field, problem in _KEY_REJECTIONS:
         listed = (parameters or {}).get(field) or {}
         if listed:
             reasons = "; ".join(f"{name} ({why})" for name, why in sorted(listed.items()))
-            found.append(ConversionRejected("parameters", f"a key quantity (of the failure's interaction) {problem}: {reasons}"))
+            found.append(ConversionRejected("parameters", f"a key quantity (of the failure's interaction) {problem}: "
+                                                          f"{reasons}"))
     unchecked_key = _key_not_compared(parameters)
     if unchecked_key:
         found.append(ConversionRejected("parameters", unchecked_key))
@@ -99,9 +104,11 @@ def judge_conversion(out: Mapping[str, Any], interaction: Mapping[str, Any], sou
         found.append(ConversionRejected("parameters", few))
     if parameters and parameters.get("outside"):
         unchecked = parameters.get("not_comparable") or {}
-        found.append(ConversionRejected("parameters", "the new scenario's ranges do not contain the failing values: " + ", ".join(
-            _outside_text(name, parameters["compared"][name]) for name in parameters["outside"])
-            + (f" (not compared: {not_compared_names_text(unchecked)})" if unchecked else "")))
+        found.append(ConversionRejected("parameters", "the new scenario's ranges do not contain the failing values: "
+                                        + ", ".join(_outside_text(name, parameters["compared"][name])
+                                                    for name in parameters["outside"])
+                                        + (f" (not compared: {not_compared_names_text(unchecked)})"
+                                           if unchecked else "")))
     return found
 
 
@@ -139,10 +146,11 @@ def _outside_text(name: str, comparison: Mapping[str, Any]) -> str:
         spelled = f" (the script's {comparison['script_name']}: {comparison.get('basis')})"
     where = f" (as the {comparison['where']})" if comparison.get("where") else ""
     if comparison.get("jointly"):
-        return (f"{name} = {exact_number(float(comparison['value']))}, which the parent's {comparison['parent_expression']} "
-                f"makes {exact_number(float(comparison['quantity']))} as {comparison['jointly']}, outside "
-                f"{exact_number(float(comparison['interval'][0]))}..{exact_number(float(comparison['interval'][1]))}, the "
-                f"interval the new script's {comparison['expression']} takes with its parameters that stand for "
+        return (f"{name} = {exact_number(float(comparison['value']))}, which the parent's "
+                f"{comparison['parent_expression']} makes {exact_number(float(comparison['quantity']))} as "
+                f"{comparison['jointly']}, outside {exact_number(float(comparison['interval'][0]))}.."
+                f"{exact_number(float(comparison['interval'][1]))}, the interval the new script's "
+                f"{comparison['expression']} takes with its parameters that stand for "
                 f"compared ones at their failing values and the others over their ranges")
     if comparison.get("interval"):
         own = comparison.get("script_name", name)
@@ -150,12 +158,13 @@ def _outside_text(name: str, comparison: Mapping[str, Any]) -> str:
                   f"{exact_number(float(comparison['quantity']))}," if comparison.get("parent_expression") else "")
         start, end = comparison["interval"]
         if comparison.get("support") and start - 1e-9 <= float(comparison["quantity"]) <= end + 1e-9:
-            return (f"{name}{spelled} = {exact_number(float(comparison['value']))}{parent} not among the values the new "
-                    f"script's {comparison['expression']} takes with {own} one of "
+            return (f"{name}{spelled} = {exact_number(float(comparison['value']))}{parent} not among the values "
+                    f"the new script's {comparison['expression']} takes with {own} one of "
                     f"{support_text(comparison['support'])}{where}")
         return (f"{name}{spelled} = {exact_number(float(comparison['value']))}{parent} outside "
                 f"{exact_number(float(start))}..{exact_number(float(end))}, the interval the new script's "
-                f"{comparison['expression']} takes with {own} in {exact_number(float(low))}..{exact_number(float(high))}{where}")
+                f"{comparison['expression']} takes with {own} in {exact_number(float(low))}.."
+                f"{exact_number(float(high))}{where}")
     if comparison.get("support") and low - 1e-9 <= float(comparison["value"]) <= high + 1e-9:
         return (f"{name}{spelled} = {exact_number(float(comparison['value']))} not among the values "
                 f"{comparison.get('script_name', name)} takes ({support_text(comparison['support'])}){where}")

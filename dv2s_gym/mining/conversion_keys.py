@@ -61,11 +61,11 @@ def _counterpart_finder(parent: str, script: str, actor: Optional[str] = None):
 def _key_checks(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
                 actor: Optional[str] = None):
     """``[(parameter, parent's (object, kind, slot), the new script's (object, kind, slot), words, the parent's
-    quantity function, tolerance, read as a target speed?)]`` for each key quantity the parent sets as one known function of the parameter
-    alone and whose object has a counterpart in the new script (:func:`_counterpart_finder`); ``tolerance`` is
-    :data:`FIXED_TOLERANCE` of the width that function takes over the parent's range of the parameter. The ego's
-    or an actor's speed is checked as its behaviour's ``target_speed`` too when the parent sets no target speed of
-    its own there (``FollowLaneBehavior(target_speed=30)`` keeps the object at 30 whatever its start speed)."""
+    quantity function, tolerance, read as a target speed?)]`` for each key quantity the parent sets as one known
+    function of the parameter alone and whose object has a counterpart in the new script (:func:`_counterpart_finder`);
+    ``tolerance`` is :data:`FIXED_TOLERANCE` of the width that function takes over the parent's range of the parameter.
+    The ego's or an actor's speed is checked as its behaviour's ``target_speed`` too when the parent sets no target
+    speed of its own there (``FollowLaneBehavior(target_speed=30)`` keeps the object at 30 whatever its start speed)."""
     old_uses = quantity_uses(parent)
     parent_fixed = fixed_quantities(parent)
     ranges = script_ranges(parent)
@@ -93,7 +93,7 @@ def _key_checks(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str
 
 
 def key_fixed_outside(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
-                       numeric: Mapping[str, float], actor: Optional[str] = None) -> Dict[str, str]:
+                      numeric: Mapping[str, float], actor: Optional[str] = None) -> Dict[str, str]:
     """``{key parameter: the key quantity and the value the new script fixes it at}`` for each key parameter whose
     key quantity (the ego's, or the key actor's: the same quantity of its counterpart in the new script;
     :func:`_key_checks`, a speed read as a target speed too) the new script sets without a parameter, to a value (a
@@ -150,7 +150,7 @@ def _flipped(script: str, where: Tuple[str, str, str], fixed: Mapping[Tuple[str,
 
 
 def key_placement_unread(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
-                          out: Mapping[str, Any], actor: Optional[str] = None) -> Dict[str, str]:
+                         out: Mapping[str, Any], actor: Optional[str] = None) -> Dict[str, str]:
     """``{key parameter: its quantity and how the new script places the actor}`` for each key parameter that sets
     where an actor (not the ego) is, a distance ahead, behind or to a side (the parent's slot), when that actor has a
     counterpart in the new script (:func:`_counterpart_finder`) whose placement does not give that quantity: not
@@ -197,7 +197,7 @@ def _unread_form(specifiers: Sequence[str], slot: str) -> str:
 
 
 def key_overridden(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
-                    numeric: Mapping[str, float], actor: Optional[str] = None) -> Dict[str, str]:
+                   numeric: Mapping[str, float], actor: Optional[str] = None) -> Dict[str, str]:
     """``{key parameter: the key quantity and the statement}`` for each key parameter whose key quantity is a
     behaviour argument that the new script's behaviour assigns anew in its body
     (:func:`~dv2s_gym.mining.param_meaning.behaviour_overrides`) where the parent's does not do so alike: the
@@ -223,7 +223,7 @@ def key_overridden(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[
 
 
 def compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
-                     numeric: Mapping[str, float], out: Dict[str, Any], actor: Optional[str] = None) -> None:
+                    numeric: Mapping[str, float], out: Dict[str, Any], actor: Optional[str] = None) -> None:
     """Compare jointly each key parameter the judge could not compare although the new script sets its key quantity
     by parameters of its own (``out["key_not_compared"]``) when both scripts set that quantity by expressions of
     parameters, numbers and inline ``Range``s in the same frame (the same slot; a placement along a lane in the same
@@ -233,9 +233,9 @@ def compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple
     (:func:`~dv2s_gym.mining.scenic_values.joint_interval`) holds each of its parameters that stands for a compared
     failing parameter (compared bare, by name or meaning) at that failing value and lets the others range over
     their ranges (each quantity on its own: a parameter of the new script that sets two of them may take one value
-    for one and another for the other): ``ego_speed * (first_arrival + ego_gap_time)`` with the failing ego_speed and the two times over
-    their ranges against the parent's ``ego_distance``. The parameter then moves to ``compared`` (``"jointly"``: the
-    quantity), inside or outside (a rejection) like any other. Updates ``out``."""
+    for one and another for the other): ``ego_speed * (first_arrival + ego_gap_time)`` with the failing ego_speed and
+    the two times over their ranges against the parent's ``ego_distance``. The parameter then moves to ``compared``
+    (``"jointly"``: the quantity), inside or outside (a rejection) like any other. Updates ``out``."""
     missing = out.get("key_not_compared") or {}
     if not missing:
         return  # (a parameter named as a failing one but not compared means something else: it is not let range)
@@ -288,7 +288,7 @@ def compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple
 
 
 def key_set_otherwise(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
-                       out: Mapping[str, Any]) -> Dict[str, str]:
+                      out: Mapping[str, Any]) -> Dict[str, str]:
     """``{key parameter not comparable: the quantity and how the new script sets it}`` for each key parameter the
     judge could not compare although the new script sets one of its key quantities (the same quantity of the paired
     object) with a parameter of its own, one that stands for no compared failing parameter (``g * g``, ``10 / g``,
@@ -321,10 +321,10 @@ def key_set_otherwise(parent: str, script: str, keyed: Mapping[str, Sequence[Tup
 
 
 def check_keys(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
-                numeric: Mapping[str, float], out: Dict[str, Any], actor: Optional[str]) -> None:
-    """:func:`~dv2s_gym.mining.conversion_parameters.compare_parameters`' checks of the key parameters (``keyed``: ``{name: where it sets a key quantity in
-    the parent}``), into ``out``: ``key``, ``key_not_compared``, the joint comparison, ``key_fixed_outside``, and
-    ``key_unread`` and ``key_overridden`` when any."""
+               numeric: Mapping[str, float], out: Dict[str, Any], actor: Optional[str]) -> None:
+    """:func:`~dv2s_gym.mining.conversion_parameters.compare_parameters`' checks of the key parameters (``keyed``:
+    ``{name: where it sets a key quantity in the parent}``), into ``out``: ``key``, ``key_not_compared``, the joint
+    comparison, ``key_fixed_outside``, and ``key_unread`` and ``key_overridden`` when any."""
     out["key"] = {name: where[0][3] for name, where in keyed.items()}
     out["key_not_compared"] = key_set_otherwise(parent, script, keyed, out)
     compare_jointly(parent, script, keyed, numeric, out, actor)

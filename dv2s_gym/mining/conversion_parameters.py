@@ -50,14 +50,16 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     that set a quantity of the failure's interaction in the parent (the ego's or the key actor's, the
     ``interaction``'s ``actor``, else an actor's of its ``kind``, every actor's when neither is known:
     :func:`~dv2s_gym.mining.param_meaning.key_parameters`): the judge requires each of them compared
-    (:func:`~dv2s_gym.mining.conversion_judge.judge_conversion`); ``"key_fixed_outside"`` those whose key quantity the new script fixes without a parameter away
-    from the failing value (:func:`~dv2s_gym.mining.conversion_keys.key_fixed_outside`), ``"key_overridden"`` (when any) those whose key behaviour
-    argument the new script's behaviour assigns anew (:func:`~dv2s_gym.mining.conversion_keys.key_overridden`), ``"key_unread"`` (when any) those
-    whose key actor's placement the new script writes in another quantity or form the judge cannot read
-    (:func:`~dv2s_gym.mining.conversion_keys.key_placement_unread`), and ``"quantities_not_compared"`` (when any) ``{parameter:
-    why}`` for a compared parameter's other quantity the judge could not read (:func:`_through_quantities`). A key
-    parameter the new script sets by parameters of its own is compared jointly when both scripts' expressions can
-    be read so (:func:`~dv2s_gym.mining.conversion_keys.compare_jointly`)."""
+    (:func:`~dv2s_gym.mining.conversion_judge.judge_conversion`); ``"key_fixed_outside"`` those whose key quantity the
+    new script fixes without a parameter away from the failing value
+    (:func:`~dv2s_gym.mining.conversion_keys.key_fixed_outside`), ``"key_overridden"`` (when any) those whose key
+    behaviour argument the new script's behaviour assigns anew
+    (:func:`~dv2s_gym.mining.conversion_keys.key_overridden`), ``"key_unread"`` (when any) those whose key actor's
+    placement the new script writes in another quantity or form the judge cannot read
+    (:func:`~dv2s_gym.mining.conversion_keys.key_placement_unread`), and ``"quantities_not_compared"`` (when any)
+    ``{parameter: why}`` for a compared parameter's other quantity the judge could not read
+    (:func:`_through_quantities`). A key parameter the new script sets by parameters of its own is compared jointly when
+    both scripts' expressions can be read so (:func:`~dv2s_gym.mining.conversion_keys.compare_jointly`)."""
     ranges, supports = script_ranges(script), script_supports(script)
     folded: Dict[str, str] = {}
     for script_name in sorted(ranges):

@@ -19,8 +19,8 @@ __all__ = ["ConversionRejected", "SETUP_ERRORS", "stage_error", "check_settings"
 
 SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPError, MissingAPIKeyError)
 """Errors of the model backends' setup (no connection, no answer, an HTTP error, no API key):
-:func:`~dv2s_gym.mining.convert.convert_failure` raises them instead of rejecting the failure, so a run stops and can be resumed
-when the endpoint works, rather than rejecting every cluster."""
+:func:`~dv2s_gym.mining.convert.convert_failure` raises them instead of rejecting the failure, so a run stops and can be
+resumed when the endpoint works, rather than rejecting every cluster."""
 
 
 class ConversionRejected(MiningError):

@@ -61,7 +61,8 @@ def add_replay(record: EpisodeRecord, bank, settings: ConversionSettings, source
     Without a ``source_trace`` (no failure video was made), the replay's own trace stands for it once its
     trajectory hash matches the record's, and is what the entry keeps (``files``: the trace only, no video);
     without an ``interaction`` it is read from that trace. A scene the reference driver failed too
-    (:func:`~dv2s_gym.mining.conversion_episodes.reference_passed`) is not replayed: ``{"entry": None, "note", "not_narrowed": {}}``."""
+    (:func:`~dv2s_gym.mining.conversion_episodes.reference_passed`) is not replayed: ``{"entry": None, "note",
+    "not_narrowed": {}}``."""
     if not reference_passed(record):
         failed = ((record.reference or {}).get("failure") or {}).get("type") or "not avoided"
         return {"entry": None, "not_narrowed": {}, "note": f"no replay entry: the reference driver failed this scene "
@@ -82,8 +83,8 @@ def add_replay(record: EpisodeRecord, bank, settings: ConversionSettings, source
 def _run_narrowed(record: EpisodeRecord, parent: Any, params: Dict[str, Any], settings: ConversionSettings,
                   source: ReplaySource) -> tuple:
     """Write the parent narrowed around the failing ``params`` and replay the recorded episode on it:
-    ``(script, intervals, not_narrowed, trace, failure, source)``, ``source`` completed from the replay when it had no trace.
-    A replay that diverges is a ``replay`` rejection."""
+    ``(script, intervals, not_narrowed, trace, failure, source)``, ``source`` completed from the replay when it had no
+    trace. A replay that diverges is a ``replay`` rejection."""
     script, intervals, not_narrowed = narrowed_script(parent.script, params)
     seed = int(record.seed)
     expected = record.result["trajectory_hash"]
@@ -93,9 +94,9 @@ def _run_narrowed(record: EpisodeRecord, parent: Any, params: Dict[str, Any], se
     result, trace, failure = run_replay(path, policy=settings.policy, seed=seed, params=params,
                                         env_config=settings.env_config, monitor=settings.monitor)
     if result.trajectory_hash != expected:
-        raise ConversionRejected("replay", f"the parent {record.scenario!r} narrowed around the failing parameters does not "
-                                  f"replay the failing episode (trajectory hash {result.trajectory_hash[:12]} != "
-                                  f"recorded {expected[:12]})")
+        raise ConversionRejected("replay", f"the parent {record.scenario!r} narrowed around the failing parameters "
+                                           f"does not replay the failing episode (trajectory hash "
+                                           f"{result.trajectory_hash[:12]} != recorded {expected[:12]})")
     if source.source_trace is None:  # the same episode step for step: its trace is the failure's own
         trace.save(folder / ENTRY_TRACE)
         source_failure = source.source_failure
@@ -154,8 +155,8 @@ def _bank_replay(out: Dict[str, Any], record: EpisodeRecord, bank, parent: Any, 
 def replay_failure_entry(record: EpisodeRecord, run_dir: PathLike, settings: ConversionSettings, *, bank: Any,
                          cluster: Optional[str] = None) -> Dict[str, Any]:
     """Keep one failure exactly, without converting it: only the exact replay entry of the failing scene
-    (stage 3 of :func:`~dv2s_gym.mining.convert.convert_failure`, with no video, description or script; the entry keeps the replay's
-    trace). Never raises for a bad failure; raises ``WrongTypeError`` when ``settings`` is not a
+    (stage 3 of :func:`~dv2s_gym.mining.convert.convert_failure`, with no video, description or script; the entry keeps
+    the replay's trace). Never raises for a bad failure; raises ``WrongTypeError`` when ``settings`` is not a
     :class:`ConversionSettings` with a policy, and :class:`~scenario_bank.records.RecordError` when ``record`` (an
     :class:`~scenario_bank.records.EpisodeRecord`, or its JSON object as ``episodes.jsonl`` holds it) is no episode
     record.
@@ -204,7 +205,7 @@ def replay_failure_entry(record: EpisodeRecord, run_dir: PathLike, settings: Con
 
 
 def replay_without_video(out: Dict[str, Any], video_error: str, record: EpisodeRecord, bank,
-                          details: Dict[str, Any], settings: ConversionSettings, source: ReplaySource) -> None:
+                         details: Dict[str, Any], settings: ConversionSettings, source: ReplaySource) -> None:
     """After the video stage failed: keep the exact replay all the same (its own trace stands for the failure's)
     and record both outcomes in ``out``: ``rejections`` holds the video's reason, then the replay's if it
     failed too."""

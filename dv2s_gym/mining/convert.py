@@ -138,18 +138,19 @@ def convert_failure(record: EpisodeRecord, run_dir: PathLike, settings: Conversi
         bank: the bank to add to (a :class:`~scenario_bank.bank.Bank` or its folder).
         cluster: the failure's cluster id (default the record's ``cluster`` key, which the miner adds).
 
-    Raises the model backends' setup errors (:data:`~dv2s_gym.mining.conversion_rejection.SETUP_ERRORS`), and ``WrongTypeError`` (a ``TypeError``)
-    for settings that are not a :class:`ConversionSettings` or name no policy; every other problem is a rejection.
+    Raises the model backends' setup errors (:data:`~dv2s_gym.mining.conversion_rejection.SETUP_ERRORS`), and
+    ``WrongTypeError`` (a ``TypeError``) for settings that are not a :class:`ConversionSettings` or name no policy;
+    every other problem is a rejection.
 
     Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
     "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
     "timings", "interaction", "replay_entry", "avoidability", "rejections", "actors", "parameters"}`` (paths
     relative to ``run_dir``; ``actors`` and ``parameters``: the judge's comparisons of the failure with the new
-    script, :func:`~dv2s_gym.mining.conversion_episodes.compare_actors` and :func:`~dv2s_gym.mining.conversion_parameters.compare_parameters`;
-    ``timings``: seconds per stage; ``status`` is the converted script's; ``replay_entry``: the exact replay's
-    bank entry, kept whatever the script's fate, and ``replay_not_narrowed`` (once the replay is made) the
-    parameters it leaves at the parent's distribution, with why; ``rejections``: every judge check that failed,
-    the first one is ``reason``).
+    script, :func:`~dv2s_gym.mining.conversion_episodes.compare_actors` and
+    :func:`~dv2s_gym.mining.conversion_parameters.compare_parameters`; ``timings``: seconds per stage; ``status`` is the
+    converted script's; ``replay_entry``: the exact replay's bank entry, kept whatever the script's fate, and
+    ``replay_not_narrowed`` (once the replay is made) the parameters it leaves at the parent's distribution, with why;
+    ``rejections``: every judge check that failed, the first one is ``reason``).
     """
     check_settings(settings, "convert_failure")
     return _Conversion(EpisodeRecord.from_dict(record), Path(run_dir), settings, bank, cluster).run()
@@ -203,7 +204,8 @@ class _Conversion:
         out["seconds"] = round(time.perf_counter() - start, 3)
         try:
             self.conversion.mkdir(parents=True, exist_ok=True)
-            write_run_file(self.conversion / "report.json", json.dumps({**out, **self.details}, indent=2, default=str) + "\n")
+            write_run_file(self.conversion / "report.json",
+                           json.dumps({**out, **self.details}, indent=2, default=str) + "\n")
         except OSError:
             pass
         return out
@@ -215,8 +217,8 @@ class _Conversion:
         if not self.source_failure.get("type"):
             raise ConversionRejected("input", "the record holds no failure (record['failure'] is empty)")
         if int(k) < 1 or not 0.0 <= float(threshold) <= 1.0:
-            raise ConversionRejected("input", f"the reproduction check needs k >= 1 and 0 <= threshold <= 1, not k={k}, "
-                                     f"threshold={threshold}")
+            raise ConversionRejected("input", f"the reproduction check needs k >= 1 and 0 <= threshold <= 1, not "
+                                              f"k={k}, threshold={threshold}")
         if isinstance(self.bank, (str, os.PathLike)):
             self.bank = Bank(self.bank)
         if (self.settings.bank_dir is None and getattr(self.bank, "root", None) is not None
@@ -236,7 +238,7 @@ class _Conversion:
         except Exception as error:  # no video, no conversion; the exact replay does not need one
             self.lap("video")
             replay_without_video(self.out, stage_error("video", error), self.record, self.bank, self.details,
-                                  self.settings, ReplaySource(self.source_failure, self.cluster, self.run_dir))
+                                 self.settings, ReplaySource(self.source_failure, self.cluster, self.run_dir))
             self.lap("replay")
             raise ConversionRejected("video", self.out["rejections"][0].split(": ", 1)[1])
         self.out["video"] = run_relative(self.video, self.run_dir)
@@ -259,8 +261,8 @@ class _Conversion:
     def _replay(self) -> None:
         self.stage = "replay"
         source = ReplaySource(self.source_failure, self.cluster, self.run_dir, source_trace=self.source_trace,
-                               interaction=self.interaction,
-                               files={ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path})
+                              interaction=self.interaction,
+                              files={ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path})
         self.replay = add_replay(self.record, self.bank, self.settings, source)
         self.out["replay_entry"] = self.replay["entry"]
         self.out["replay_not_narrowed"] = dict(self.replay.get("not_narrowed") or {})
@@ -313,7 +315,7 @@ class _Conversion:
         self.stage = "reproduction"
 
         episodes, self.traces = reproduce(self.script_path, self.settings.policy, self.settings,
-                                           int(self.record.seed), self.source_failure, self.interaction)
+                                          int(self.record.seed), self.source_failure, self.interaction)
         self.reproduced = sum(e["reproduced"] for e in episodes)
         self.shown = sum(bool(e["interaction"]) for e in episodes)
         low, high = wilson_interval(self.reproduced, len(episodes))
@@ -329,7 +331,7 @@ class _Conversion:
         reference = self.settings.reference
         if reference:
             reference_episodes, _ = reproduce(self.script_path, reference, self.settings, int(self.record.seed),
-                                               self.source_failure)
+                                              self.source_failure)
             self.out["avoidability"] = reference_outcome(self.source_failure, reference_episodes,
                                                          policy_name(reference))
             self.details["reference_episodes"] = reference_episodes
@@ -364,9 +366,10 @@ class _Conversion:
             raise rejections[0]
 
     def _clip(self) -> None:
-        """One reproduction episode of the converted script (:func:`~dv2s_gym.mining.conversion_episodes.clip_episode`: one that failed the same way
-        when there is one) filmed as the failure was, so a reader sees whether the script plays the failure. The
-        clip is extra: when it cannot be made, the record says why and the conversion goes on without it."""
+        """One reproduction episode of the converted script (:func:`~dv2s_gym.mining.conversion_episodes.clip_episode`:
+        one that failed the same way when there is one) filmed as the failure was, so a reader sees whether the script
+        plays the failure. The clip is extra: when it cannot be made, the record says why and the conversion goes on
+        without it."""
         self.stage = "clip"
 
         episodes = self.details.get("reproduction_episodes") or []
