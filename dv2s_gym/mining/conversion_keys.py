@@ -241,7 +241,7 @@ def compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple
         return  # (a parameter named as a failing one but not compared means something else: it is not let range)
     old_uses, new_uses = quantity_uses(parent), quantity_uses(script)
     counterpart = _counterpart_finder(parent, script, actor)
-    script_ranges = script_ranges(script)
+    new_ranges = script_ranges(script)
     values: Dict[str, Tuple[float, float]] = {}
     standing = {comparison.get("script_name", name): comparison for name, comparison in out["compared"].items()}
     for param in script_parameters(script):
@@ -249,8 +249,8 @@ def compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple
             comparison = standing[param]
             if not any(field in comparison for field in ("expression", "support")):
                 values[param] = (comparison["value"], comparison["value"])
-        elif param in script_ranges and param not in script_supports(script) and param not in numeric:
-            values[param] = tuple(script_ranges[param])
+        elif param in new_ranges and param not in script_supports(script) and param not in numeric:
+            values[param] = tuple(new_ranges[param])
     failing = {name: (float(value), float(value)) for name, value in numeric.items()}
     for name in sorted(missing):
         for obj, kind, slot, words in keyed[name]:
