@@ -1,6 +1,6 @@
 """How a mined failure is converted and judged: :class:`ConversionSettings` (one record, handed from the command
 line and the miner to :func:`dv2s_gym.mining.convert.convert_failure` and
-:func:`~dv2s_gym.mining.convert.replay_failure_entry`)."""
+:func:`~dv2s_gym.mining.conversion_replay.replay_failure_entry`)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ PathLike = Union[str, os.PathLike]
 @dataclasses.dataclass(frozen=True)
 class ConversionSettings:
     """How :func:`~dv2s_gym.mining.convert.convert_failure` converts and judges a failure (and how
-    :func:`~dv2s_gym.mining.convert.replay_failure_entry` keeps its exact replay); ``dv2s mine``'s conversion
+    :func:`~dv2s_gym.mining.conversion_replay.replay_failure_entry` keeps its exact replay); ``dv2s mine``'s conversion
     options are these. Every field is checked when the settings are made (:class:`MiningError` names the field and
     the bad value); a ``k`` below 1 or a ``threshold`` outside [0, 1] is not refused here but makes each conversion
     a rejection at its ``input`` stage. Not recorded in a run folder (a resumed run may convert otherwise)."""
