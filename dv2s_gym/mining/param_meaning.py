@@ -1,9 +1,9 @@
 """Which global parameter of one Scenic script means the same as one of another, read from the scripts' structure.
 
 A generated script names its parameters anew (``car1_cut_gap`` for the parent's ``cut_in_gap``), so the conversion
-judge (:func:`dv2s_gym.mining.conversion_parameters.compare_parameters`) cannot find most of a failure's parameters by name. Here a
-parameter's *meaning* is where it goes: which object it feeds (the ego, or another actor, with its kind) and which
-quantity of it it sets (its *slot*):
+judge (:func:`dv2s_gym.mining.conversion_parameters.compare_parameters`) cannot find most of a failure's parameters by
+name. Here a parameter's *meaning* is where it goes: which object it feeds (the ego, or another actor, with its kind)
+and which quantity of it it sets (its *slot*):
 
 - ``speed``: the object's ``with speed``; ``with:<property>``: another ``with`` specifier;
 - ``behavior:<argument>``: an argument of the object's behaviour, by the behaviour's own name for it (positional
