@@ -139,8 +139,9 @@ def convert_failure(record: EpisodeRecord, run_dir: PathLike, settings: Conversi
         cluster: the failure's cluster id (default the record's ``cluster`` key, which the miner adds).
 
     Raises the model backends' setup errors (:data:`~dv2s_gym.mining.conversion_rejection.SETUP_ERRORS`), and
-    ``WrongTypeError`` (a ``TypeError``) for settings that are not a :class:`ConversionSettings` or name no policy;
-    every other problem is a rejection.
+    ``WrongTypeError`` (a ``TypeError``) for settings that are not a :class:`ConversionSettings` or name no policy,
+    and :class:`~scenario_bank.records.RecordError` for a record that is no episode record (a field of the wrong kind,
+    or no ``index``, ``scenario`` or ``seed``); every other problem is a rejection.
 
     Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
     "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
