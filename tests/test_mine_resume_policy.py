@@ -12,7 +12,7 @@ import dv2s_gym.mining.space as space_module
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import _recorded, mine
 from dv2s_gym.mining.settings import MineSettings
-from dv2s_gym.regress.identity import RESUME_FINGERPRINT
+from policies.run_identity import RESUME_FINGERPRINT
 from policies.registry import SHIPPED_CHECKPOINT
 
 SCENARIOS = ("highway_lead_vehicle_brakes",)
