@@ -544,21 +544,3 @@ def test_a_folder_holding_another_run_is_refused_with_each_setting_both_values_a
         f"delete {tmp_path}) for a new run")
     with RunStore(tmp_path, {"episodes": 4, "seed": 0, "scenarios": ["a"]}) as same:
         assert same.open() == {}
-
-
-@pytest.mark.slow
-def test_a_setting_the_run_did_not_record_is_its_default(tmp_path):
-    """A run folder written before a setting existed resumes with the setting's default and refuses another value."""
-    options = dict(scenarios=["highway_lead_vehicle_brakes"], episodes=1, workers=1, out_dir=tmp_path,
-                   env_config={"duration": 6}, progress=False)
-    run_regression("rule", "keep_lane", **options)
-    path = tmp_path / "run.json"
-    stored = json.loads(path.read_text())
-    del stored["settings"]["stall_seconds"]
-    path.write_text(json.dumps(stored))
-    with pytest.raises(ResumeMismatchError, match=r"\(stall_seconds: run has 5.0 \(not recorded: the default\), "
-                                                  r"asked 1.0\)"):
-        run_regression("rule", "keep_lane", **{**options, "stall_seconds": 1})
-    ran = []
-    run_regression("rule", "keep_lane", on_result=ran.append, **options)
-    assert ran == []  # resumed: both episodes were already done
