@@ -403,8 +403,9 @@ def test_baseline_report_of_another_schema_bank_or_config_is_refused(noisy_run, 
         path.write_text(json.dumps(data))
         return path
 
-    other_schema = variant("schema", lambda d: d.update(schema_version=2))
-    with pytest.raises(ReportMismatchError, match="schema version 2, this dv2s-gym reads version 1"):
+    other_schema = variant("schema", lambda d: d.update(schema_version=SCHEMA_VERSION + 1))
+    with pytest.raises(ReportMismatchError,
+                       match=f"schema version {SCHEMA_VERSION + 1}, this dv2s-gym reads version {SCHEMA_VERSION}"):
         run_regression("rule", baseline_report=other_schema, episodes=4, out_dir=tmp_path / "a", progress=False)
     other_bank = variant("bank", lambda d: d["bank"]["hashes"].update({PAIR[1]: "0" * 64}))
     with pytest.raises(ReportMismatchError, match=f"another bank version.*changed scenario {PAIR[1]}"):
