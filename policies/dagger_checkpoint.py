@@ -37,7 +37,7 @@ import numpy as np
 
 from policies.dagger_config import DaggerConfig
 from policies.training import TrainingError
-from scenario_bank.run_identity import check_identity, setting_defaults
+from scenario_bank.run_identity import check_format, check_identity, record_format
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json, file_sha256
 from scenario_bank.bank import Bank
 
@@ -51,16 +51,12 @@ CHECKPOINT_DIR = "dagger_checkpoint"
 """The checkpoint's folder inside the fine-tuning run's ``out``."""
 
 SCHEMA = "dv2s-dagger-checkpoint"
+VERSION = 2
+"""The format of ``progress.json`` (bumped when its fields change; a checkpoint of another format is refused)."""
 
 IDENTITY_ORDER = ("steps", "iterations", "epochs", "batch_size", "learning_rate", "beta", "beta_decay", "reference",
                   "seed", "n_envs", "weights", "env_config", "bank_dir", "source", "source_sha256", "scenario_hashes")
 """The order in which a refused checkpoint's settings are compared (the first difference is named)."""
-
-IDENTITY_DEFAULTS = setting_defaults(DaggerConfig, ("iterations", "beta", "beta_decay", "epochs", "batch_size",
-                                                   "learning_rate", "reference", "slower_weight",
-                                                   "disagreement_weight"))
-"""The identity's :class:`~policies.dagger_config.DaggerConfig` settings, as their defaults: what a checkpoint that
-does not record one compares as (the other identity values are the run's own: bytes, hashes, scenarios)."""
 
 _DERIVED = {"source_sha256": " (the source checkpoint's file changed)",
             "scenario_hashes": " (the bank's scenario scripts changed)"}
@@ -184,6 +180,9 @@ class DAggerCheckpoint:
         except (OSError, ValueError) as error:
             data, problem = None, str(error)
         else:
+            if isinstance(data, dict) and data.get("schema") == SCHEMA:
+                check_format(data, SCHEMA, VERSION, folder=self.folder, what="the checkpoint of an unfinished DAgger "
+                             "run", file=self.progress_path.name, error=DAggerResumeError)
             problem = _progress_problem(data)
         if problem:
             raise DAggerResumeError(f"the DAgger checkpoint {self.progress_path} is unreadable ({problem}); delete "
@@ -204,7 +203,7 @@ class DAggerCheckpoint:
         recorded = data.get("identity") or {}
         keys = [key for key in IDENTITY_ORDER if key in recorded or key in self.identity]
         check_identity(recorded, self.identity, keys + sorted((set(recorded) | set(self.identity)) - set(keys)),
-                       run=f"{self.folder} holds an unfinished DAgger run", notes=_DERIVED, defaults=IDENTITY_DEFAULTS,
+                       run=f"{self.folder} holds an unfinished DAgger run", notes=_DERIVED,
                        fix=f"pass the same settings to resume it, or delete {self.folder} to start over")
         iteration = int(data["iteration"])
         try:
@@ -253,7 +252,7 @@ class DAggerCheckpoint:
         torch.save({"policy": model.policy.state_dict(), "optimizer": optimizer.state_dict(),
                     "torch_rng": torch.get_rng_state()}, buffer)
         atomic_write_bytes(self.folder / f"weights_{iteration}.pt", buffer.getvalue())
-        self._committed = {"schema": SCHEMA, "schema_version": 1, "identity": self.identity,
+        self._committed = {**record_format(SCHEMA, VERSION), "identity": self.identity,
                            "iteration": int(iteration), "history": history, "rng": rng.bit_generator.state, "envs": envs,
                            "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes}
         atomic_write_json(self.progress_path, {**self._committed, "partial": None})
@@ -268,7 +267,7 @@ class DAggerCheckpoint:
         name = f"partial_{partial.iteration}_{partial.rows}.npz"
         atomic_write_bytes(self.folder / name, _npz_bytes(partial))
         committed = self._committed or {
-            "schema": SCHEMA, "schema_version": 1, "identity": self.identity, "iteration": 0, "history": [],
+            **record_format(SCHEMA, VERSION), "identity": self.identity, "iteration": 0, "history": [],
             "rng": rng.bit_generator.state, "envs": []}
         atomic_write_json(self.progress_path, {
             **committed, "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes,

@@ -70,7 +70,7 @@ from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_path, atomic_write_json
 from scenario_bank.field_checks import (check_bool, check_choice, check_int, check_mapping, check_names,
                                         check_number, check_path)
-from scenario_bank.run_identity import check_identity
+from scenario_bank.run_identity import check_format, check_identity, record_format
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 import stable_baselines3 as sb3
@@ -341,6 +341,17 @@ class TrainConfig:
             raise TrainingError(f"run settings name unknown field(s) {', '.join(sorted(unknown))}; "
                                 "was the run made by a newer dv2s-gym?")
         return cls(**dict(data))
+
+
+_RUN_SCHEMA = "dv2s-train-run"
+_RUN_VERSION = 1
+"""The format of a training run's ``run.json`` (bumped when its fields change; a run folder of another format is
+refused on resume)."""
+
+
+def _new_run_record(config: TrainConfig) -> Dict[str, Any]:
+    """A new run's ``run.json``: its format, its settings and no segment yet."""
+    return {**record_format(_RUN_SCHEMA, _RUN_VERSION), "config": config.to_json(), "segments": []}
 
 
 _FINE_TUNING_ONLY = ("learning_rate", "reward_weights")
@@ -734,14 +745,20 @@ def latest_checkpoint(out: os.PathLike | str) -> Optional[Path]:
 
 
 def load_run_config(out: os.PathLike | str) -> Tuple[TrainConfig, Dict[str, Any]]:
-    """The settings and the ``run.json`` record of the run in ``out``."""
+    """The settings and the ``run.json`` record of the run in ``out`` (one of another format, :data:`_RUN_VERSION`,
+    is refused)."""
     path = Path(out) / "run.json"
     if not path.is_file():
         raise TrainingError(f"{out} holds no training run (no run.json); start one without --resume")
     try:
         record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise TrainingError(f"{path} is not a readable run record ({error}); start a new run in another --out") from error
+    check_format(record, _RUN_SCHEMA, _RUN_VERSION, folder=out, what="a training run", file=path.name,
+                 error=TrainingError)
+    try:
         return TrainConfig.from_json(record["config"]), record
-    except (OSError, ValueError, KeyError, TypeError) as error:
+    except (KeyError, TypeError) as error:
         raise TrainingError(f"{path} is not a readable run record ({error}); start a new run in another --out") from error
 
 
@@ -764,10 +781,9 @@ def _resolve_names(config: TrainConfig) -> List[str]:
 
 
 def _check_resume(config: TrainConfig, recorded: Mapping[str, Any]) -> None:
-    """Refuse ``config`` unless it has the identity of the run's ``recorded`` settings (``run.json``'s ``config``;
-    a setting it lacks is the field's default)."""
+    """Refuse ``config`` unless it has the identity of the run's ``recorded`` settings (``run.json``'s ``config``,
+    :meth:`TrainConfig.to_json`'s form: a fine-tuning setting it leaves out is ``None`` on both sides)."""
     check_identity(recorded, config.to_json(), TrainConfig.IDENTITY, run=f"{config.out} holds a training run",
-                   defaults=TrainConfig,
                    fix="resume with the run's own settings (omit the option) or start a new run in another --out")
 
 
@@ -943,14 +959,14 @@ def _open_record(config: TrainConfig, resume: bool, log: Callable[[str], None]
     record (its settings checked against ``config``), or a new one (refused over an existing run)."""
     out = Path(config.out)
     checkpoint = latest_checkpoint(out)
-    record: Dict[str, Any] = {"config": config.to_json(), "segments": []}
+    record: Dict[str, Any] = _new_run_record(config)
     if resume:
         _, record = load_run_config(out)
         _check_resume(config, record["config"])
         if checkpoint is None:
             # stopped before its first checkpoint: nothing was kept, so the run starts over in place
             log(f"{out} holds no checkpoint yet (the run stopped before its first one): starting from step 0")
-            resume, record = False, {"config": config.to_json(), "segments": []}
+            resume, record = False, _new_run_record(config)
         else:
             record["config"] = config.to_json()
     elif checkpoint is not None or (out / "run.json").exists():
@@ -1193,4 +1209,4 @@ def _first_checkpoint(config: TrainConfig, source: Path, start_step: int, learni
             model.learning_rate = float(learning_rate)
             model._setup_lr_schedule()
             model.save(tmp)
-    atomic_write_json(out / "run.json", {"config": config.to_json(), "segments": []})
+    atomic_write_json(out / "run.json", _new_run_record(config))

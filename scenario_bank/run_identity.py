@@ -6,10 +6,10 @@ of the call that resumes it: a difference is refused with :class:`RunIdentityErr
 setting that differs (the recorded and the asked value) and the fix. Settings that only change how the
 run goes (workers, progress bars) are not part of a run's identity.
 
-A setting added to a command after a run folder was written is absent from that folder's record: it compares as
-the setting's default (the value the command used before the setting existed, :func:`setting_defaults`), so the
-run resumes when the default is asked and is refused, naming the setting, when another value is. A setting
-recorded as ``null`` stays ``null``.
+Each run record also carries its format (:func:`record_format`: a schema name and a version number, bumped when
+the record's fields change); a record of any other format, or of none, is refused by :func:`check_format` in one
+line saying that another version of dv2s-gym wrote the folder and that a new ``--out`` folder starts the run anew.
+A setting a record does not hold, or holds as ``null``, is ``None``.
 """
 
 from __future__ import annotations
@@ -21,12 +21,12 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 from scenario_bank.errors import DV2SError
 
 __all__ = ["RunIdentityError", "identity_of", "differing", "check_identity", "setting", "resume_keys",
-           "recorded_settings", "setting_defaults"]
+           "recorded_settings", "record_format", "check_format", "FORMAT_KEYS"]
 
 _SHOWN = 3
 """Differences spelled out in a refusal (the rest are counted)."""
-_UNRECORDED = " (not recorded: the default)"
-"""Said of a recorded value that is the setting's default because the run did not record the setting."""
+FORMAT_KEYS = ("schema", "version")
+"""The keys of a run record that name its format (:func:`record_format`)."""
 
 
 class RunIdentityError(DV2SError, ValueError):
@@ -52,32 +52,10 @@ def _same(recorded: Any, asked: Any) -> bool:
     return json.dumps(recorded, sort_keys=True, default=str) == json.dumps(asked, sort_keys=True, default=str)
 
 
-Defaults = Union[type, Mapping[str, Any], None]
-"""What a setting absent from a record compares as: a settings dataclass (its fields' defaults,
-:func:`setting_defaults`), a mapping of setting to default (recorded JSON values), or ``None`` (no defaults)."""
-
-
-def _defaults_mapping(defaults: Defaults) -> Mapping[str, Any]:
-    if defaults is None:
-        return {}
-    if isinstance(defaults, type):
-        return setting_defaults(defaults)
-    return defaults
-
-
-def _value(settings: Mapping[str, Any], key: str, defaults: Mapping[str, Any]) -> Any:
-    """``settings[key]``; when it lacks the key, the key's default (``None`` when it has none)."""
-    if key in settings:
-        return settings[key]
-    return defaults.get(key)
-
-
-def differing(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str], *,
-              defaults: Defaults = None) -> List[str]:
-    """The ``keys`` whose values differ between ``recorded`` and ``asked``, in ``keys``' order (a setting one
-    of them lacks is its default in ``defaults``, else ``None``)."""
-    known = _defaults_mapping(defaults)
-    return [key for key in keys if not _same(_value(recorded, key, known), _value(asked, key, known))]
+def differing(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str]) -> List[str]:
+    """The ``keys`` whose values differ between ``recorded`` and ``asked``, in ``keys``' order (a setting one of
+    them lacks is ``None``)."""
+    return [key for key in keys if not _same(recorded.get(key), asked.get(key))]
 
 
 def _show(value: Any, limit: int = 80) -> str:
@@ -86,29 +64,50 @@ def _show(value: Any, limit: int = 80) -> str:
 
 
 def check_identity(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str], *, run: str,
-                   fix: str, defaults: Defaults, notes: Optional[Mapping[str, str]] = None,
+                   fix: str, notes: Optional[Mapping[str, str]] = None,
                    error: Type[RunIdentityError] = RunIdentityError) -> None:
-    """Refuse to resume ``run`` (e.g. ``"out/mine holds a mining run"``) when any of ``keys`` differs.
-
-    ``defaults`` (:data:`Defaults`, the run's settings dataclass or a mapping): what a setting absent from
-    ``recorded`` (a run written before the setting existed) or from ``asked`` compares as; a recorded ``None`` is
-    ``None``. A setting without a default compares as ``None`` when absent.
+    """Refuse to resume ``run`` (e.g. ``"out/mine holds a mining run"``) when any of ``keys`` differs (a setting
+    absent from ``recorded`` or ``asked`` is ``None``: a record of this format holds every setting,
+    :func:`check_format`).
 
     Raises:
         RunIdentityError: ``"<run> with other settings (<key>: run has <old>, asked <new>; ...); <fix>"``;
             ``notes`` adds a parenthesised why to a setting (a derived one, such as a file's hash). ``error``:
             the subclass raised (a command's own, such as ``dv2s regress``'s ``ResumeMismatchError``).
     """
-    known = _defaults_mapping(defaults)
-    keys_differing = differing(recorded, asked, keys, defaults=known)
+    keys_differing = differing(recorded, asked, keys)
     if not keys_differing:
         return
-    differences = [(key, _value(recorded, key, known), _value(asked, key, known)) for key in keys_differing]
-    shown = [f"{key}: run has {_show(old)}{_UNRECORDED if key not in recorded and key in known else ''}, "
-             f"asked {_show(new)}{(notes or {}).get(key, '')}" for key, old, new in differences[:_SHOWN]]
+    differences = [(key, recorded.get(key), asked.get(key)) for key in keys_differing]
+    shown = [f"{key}: run has {_show(old)}, asked {_show(new)}{(notes or {}).get(key, '')}"
+             for key, old, new in differences[:_SHOWN]]
     if len(differences) > _SHOWN:
         shown.append(f"and {len(differences) - _SHOWN} more")
     raise error(f"{run} with other settings ({'; '.join(shown)}); {fix}", differences)
+
+
+def record_format(schema: str, version: int) -> Dict[str, Any]:
+    """The keys that open a run record of format ``version`` of ``schema`` (e.g. ``"dv2s-mine"``): ``{"schema":
+    schema, "version": version}``; :func:`check_format` refuses any other on resume."""
+    return {"schema": schema, "version": version}
+
+
+def check_format(record: Any, schema: str, version: int, *, folder: Any, what: str, file: str,
+                 error: Type[Exception]) -> None:
+    """Refuse a run record (``file`` in ``folder``, which holds ``what``, e.g. ``"a mining run"``) that is not of
+    format ``version`` of ``schema`` (:func:`record_format`): one written by another version of dv2s-gym, which
+    this one does not read on.
+
+    Raises:
+        error: ``"<folder> holds <what> written by another version of dv2s-gym (its <file> records format <n> |
+            no format, this dv2s-gym reads format <version>); start a new --out folder"``.
+    """
+    found = record.get("version") if isinstance(record, Mapping) and record.get("schema") == schema else None
+    if found == version and type(found) is int:
+        return
+    written = f"format {found}" if isinstance(found, int) and not isinstance(found, bool) else "no format"
+    raise error(f"{folder} holds {what} written by another version of dv2s-gym (its {file} records {written}, "
+                f"this dv2s-gym reads format {version}); start a new --out folder")
 
 
 # --------------------------------------------------------------------------- settings dataclasses
@@ -160,21 +159,3 @@ def _json_value(field: dataclasses.Field, value: Any) -> Any:
     if isinstance(value, Mapping):
         return dict(value)
     return value
-
-
-def setting_defaults(settings_class: type, keys: Optional[Sequence[str]] = None) -> Dict[str, Any]:
-    """The default of each field of a settings dataclass that has one, as its run folder records it
-    (:func:`recorded_settings`' JSON form; fields declared ``record=False`` have none); only ``keys`` when given."""
-    values: Dict[str, Any] = {}
-    for field in dataclasses.fields(settings_class):
-        record = field.metadata.get(_RECORD, True)
-        if record is False or (keys is not None and field.name not in keys):
-            continue
-        if field.default is not dataclasses.MISSING:
-            value = field.default
-        elif field.default_factory is not dataclasses.MISSING:
-            value = field.default_factory()
-        else:
-            continue
-        values[field.name] = record(value) if callable(record) else _json_value(field, value)
-    return values

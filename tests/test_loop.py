@@ -1328,28 +1328,8 @@ def test_merging_the_steps_error_messages_counts_each_distinct_message_once():
     assert text.endswith("scene rejected by requirement 3 (1 episode); and 2 more distinct message(s) in 2 episode(s)")
 
 
-def test_a_setting_the_loop_did_not_record_is_its_default(tmp_path, monkeypatch):
-    """A loop folder written before a setting existed resumes with the setting's default (its report then states
-    it) and refuses another value naming the setting."""
-    _StandIns(monkeypatch)
-    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
-    settings = {**WIRING, "min_heldout_episodes": 1, "min_heldout_families": 2}
-    run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
-    path = tmp_path / "loop" / "loop.json"
-    state = json.loads(path.read_text())
-    del state["settings"]["mined_share"]
-    path.write_text(json.dumps(state))
-    with pytest.raises(RunIdentityError, match=r"\(mined_share: run has 0.5 \(not recorded: the default\), "
-                                               r"asked 0.25\)"):
-        run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **{**settings, "mined_share": 0.25})
-    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
-    assert report.settings["mined_share"] == 0.5  # the report states the value the loop ran with
-    assert len(miner.calls) == 1  # the finished round was not run again
-
-
 def test_a_loop_whose_starting_checkpoint_was_replaced_in_place_is_refused(tmp_path, monkeypatch):
-    """The same spec naming other bytes is another policy: resuming is refused naming the checkpoint and the fix;
-    a loop folder without the policy's fingerprint was written by an older dv2s-gym."""
+    """The same spec naming other bytes is another policy: resuming is refused naming the checkpoint and the fix."""
     _StandIns(monkeypatch)
     miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
     settings = {**WIRING, "min_heldout_episodes": 1, "min_heldout_families": 2}
@@ -1365,12 +1345,6 @@ def test_a_loop_whose_starting_checkpoint_was_replaced_in_place_is_refused(tmp_p
     message = str(error.value)
     assert "\n" not in message and "holds a loop of" in message and "whose policy has changed since (checkpoint" in message
     assert "restore the policy" in message and message.endswith("or pass a new --out")
-    path = tmp_path / "loop" / "loop.json"
-    state = json.loads(path.read_text())
-    del state["settings"]["policy_fingerprint"]
-    path.write_text(json.dumps(state))
-    with pytest.raises(LoopError, match=r"was written by an older dv2s-gym \(its settings record no fingerprint"):
-        run_loop(spec, out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
 
 
 @pytest.mark.parametrize("given, meant", [("lead_brak", "highway_lead_vehicle_brakes"), ("my_failure.scenic", None)])

@@ -57,7 +57,7 @@ def test_a_scene_the_reference_driver_failed_too_gets_no_replay_entry(record, tm
 def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(record, tmp_path):
     from dv2s_gym.mining.exact_replay import replay_versions
     from dv2s_gym.regress.identity import dv2s_sources_sha256
-    from dv2s_gym.regress.identity import installed_version
+    from policies.run_identity import installed_version
     from envs.trace import TRACE_VERSION
     from policies.registry import SHIPPED_CHECKPOINT
     from scenario_bank.atomic import file_sha256
@@ -93,10 +93,10 @@ def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(recor
     bank.update_source(name, {"replay": {**replay, "trajectory_hash": "0" * 64}})
     same = replay_failure(bank, name)
     assert not same["matches"] and "a real divergence" in same["reason"]
-    # an entry from before the versions were recorded cannot tell
-    old = {k: v for k, v in replay.items() if k not in replay_versions("keep_lane")}
-    bank.update_source(name, {"replay": {**old, "trajectory_hash": "0" * 64}})
-    assert "records no policy checkpoint or dv2s-gym version" in replay_failure(bank, name)["reason"]
+    # an entry that records none of them: each is named as changed
+    bare = {k: v for k, v in replay.items() if k not in replay_versions("keep_lane")}
+    bank.update_source(name, {"replay": {**bare, "trajectory_hash": "0" * 64}})
+    assert f"dv2s-gym is version {installed_version()} now, None when recorded" in replay_failure(bank, name)["reason"]
 
 
 def test_a_replay_that_does_not_match_the_recorded_episode_is_rejected_and_adds_nothing(record, tmp_path):

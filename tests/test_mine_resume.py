@@ -43,17 +43,3 @@ def test_the_same_settings_go_on_to_build_the_space(run_folder):
     with pytest.raises(_SpaceBuilt):  # the early check passes what the full one would
         mine("rule", MineSettings(budget=2, scenarios=SCENARIOS, seed=0), out=run_folder, progress=False,
              reports=False)
-
-
-def test_a_setting_the_run_did_not_record_is_its_default(run_folder):
-    """A run folder written before a setting existed resumes with the setting's default and refuses another value."""
-    path = run_folder / "settings.json"
-    recorded = json.loads(path.read_text(encoding="utf-8"))
-    del recorded["stall_seconds"]
-    path.write_text(json.dumps(recorded), encoding="utf-8")
-    with pytest.raises(RunIdentityError, match=r"\(stall_seconds: run has 5.0 \(not recorded: the default\), "
-                                               r"asked 2.0\)"):
-        mine("rule", MineSettings(budget=2, scenarios=SCENARIOS, stall_seconds=2.0), out=run_folder, progress=False,
-             reports=False)
-    with pytest.raises(_SpaceBuilt):
-        mine("rule", MineSettings(budget=2, scenarios=SCENARIOS), out=run_folder, progress=False, reports=False)

@@ -12,7 +12,7 @@ import dv2s_gym.mining.space as space_module
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import _recorded, mine
 from dv2s_gym.mining.settings import MineSettings
-from dv2s_gym.regress.identity import RESUME_FINGERPRINT
+from policies.run_identity import RESUME_FINGERPRINT
 from policies.registry import SHIPPED_CHECKPOINT
 
 SCENARIOS = ("highway_lead_vehicle_brakes",)
@@ -69,7 +69,7 @@ def test_a_checkpoint_replaced_in_place_is_refused(tmp_path, no_space):
         _mine(spec, out)
 
 
-def test_a_run_folder_without_a_policy_fingerprint_is_refused_in_one_line(tmp_path, no_space):
+def test_a_run_folder_whose_record_lacks_the_policy_fingerprint_is_refused_naming_the_facts(tmp_path, no_space):
     out = _run_folder(tmp_path, "rule")
     recorded = json.loads((out / "settings.json").read_text(encoding="utf-8"))
     del recorded[RESUME_FINGERPRINT]
@@ -77,5 +77,5 @@ def test_a_run_folder_without_a_policy_fingerprint_is_refused_in_one_line(tmp_pa
     with pytest.raises(MiningError) as error:
         _mine("rule", out)
     message = str(error.value)
-    assert "\n" not in message and message.startswith(f"{out} was written by an older dv2s-gym (")
-    assert message.endswith("rerun with a new --out")
+    assert "\n" not in message and message.startswith(f"{out} holds a mining run of rule whose policy has changed ")
+    assert "dv2s version: run has absent, now " in message and message.endswith("or pass a new --out")

@@ -98,8 +98,8 @@ def test_a_stall_names_the_car_the_ego_stood_behind_in_its_lane():
 
 
 def _record(index: int, scenario: str, kind: str, behaviour, point) -> EpisodeRecord:
-    record = {"index": index, "scenario": scenario, "seed": index, "failure": {"type": kind.split(":")[0], "kind": kind},
-              "point": point, "error": None}
+    record = {"index": index, "scenario": scenario, "family": scenario, "seed": index,
+              "failure": {"type": kind.split(":")[0], "kind": kind}, "point": point, "error": None}
     if behaviour:
         record["behaviour"] = dict(zip(("actor", "actor_manoeuvre", "ego_manoeuvre"), behaviour))
     return EpisodeRecord.from_dict(record)

@@ -48,6 +48,7 @@ def midpoint(scenario: str) -> dict:
 def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane", index: int = 0,
                 bank_dir: str | None = None) -> dict:
     """The miner's episode record of one scene (its worker runs the episode and the failure monitors)."""
+    from dv2s_gym.mining.family import scenario_family
     from dv2s_gym.mining.monitors import MonitorSettings
     from dv2s_gym.mining.tasks import MineTask, run_mine_task
 
@@ -55,7 +56,7 @@ def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane
                                     bank_dir=bank_dir,
                                     monitor=MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)).to_json())
     assert record["error"] is None and record["failure"]["type"] == "collision", record
-    return record.to_dict()  # as episodes.jsonl holds it
+    return {**record.to_dict(), "family": scenario_family(scenario, bank_dir)}  # as episodes.jsonl holds it
 
 
 @pytest.fixture(scope="module")

@@ -499,7 +499,7 @@ def test_novelty_feedback_feeds_a_repeated_parameter_cell_as_an_easy_scene():
     from dv2s_gym.mining.miner import _feedback
 
     failure = {"type": "collision", "kind": "collision:rear_end"}
-    first = EpisodeRecord(index=0, scenario=BRAKES, seed=0, point=[0.1, 0.9], failure=failure, rho=-2.0)
+    first = EpisodeRecord(index=0, scenario=BRAKES, family=BRAKES, seed=0, point=[0.1, 0.9], failure=failure, rho=-2.0)
     same_cell = first.replace(index=1, point=[0.2, 0.8], rho=-1.5)
     other_cell = first.replace(index=2, point=[0.5, 0.8], rho=-1.2)
     passed = first.replace(index=3, failure=None, rho=3.0)

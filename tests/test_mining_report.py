@@ -21,6 +21,7 @@ from dv2s_gym.mining.report import (SCHEMA, SCHEMA_VERSION, MiningReportError, b
                                     markdown, write_reports)
 from envs.errors import DV2SError
 from scenario_bank.records import EpisodeRecord
+from dv2s_gym.mining.errors import MiningError
 from browser_helpers import body_attributes, table_widths
 
 POLICY = "rule?action_noise=0.3"
@@ -81,7 +82,8 @@ def _record(index: int, sampler: str, scenario: str, u: float, kind, avoidable, 
     if kind and avoidable is not None:
         reference = {"policy": "rule", "failure": _failure(kind, 3.5) if avoidable is False else None,
                      "trajectory_hash": f"r{index}"}
-    return {"index": index, "sampler": sampler, "policy": POLICY, "scenario": scenario, "seed": 1000 + index,
+    return {"index": index, "sampler": sampler, "policy": POLICY, "scenario": scenario, "family": scenario,
+            "seed": 1000 + index,
             "params": {"ego_speed": 20.0 + 15.0 * u}, "point": [u], "result": result, "failure": failure,
             "rho": (-1.0 - index / 100) if kind else 1.0, "reference": reference,
             "avoidable": avoidable if kind else None, "trace": f"traces/{index:06d}.json.gz" if kind else None,
@@ -625,8 +627,9 @@ def test_one_behaviour_in_two_entries_of_one_family_is_one_behaviour(tmp_path):
     assert cluster["scenarios"] == ["mined_a", "replay_a"] and cluster["size"] == 3
     assert report["scenarios"]["replay_a"]["clusters"] == report["scenarios"]["mined_a"]["clusters"] == 1
     assert "`mined_a`, `replay_a`" in markdown(report)
-    legacy = [{k: v for k, v in r.items() if k != "family"} for r in records]  # runs recorded before families
-    assert len(set(cluster_failures([EpisodeRecord.from_dict(r) for r in legacy]).values())) == 2
+    without = [{k: v for k, v in r.items() if k != "family"} for r in records]  # no family: not a record of a run
+    with pytest.raises(MiningError, match="episode 0 of mined_a records no scenario family"):
+        cluster_failures([EpisodeRecord.from_dict(r) for r in without])
 
 
 def test_a_scenario_s_family_follows_the_provenance_to_its_first_scenario(tmp_path):

@@ -1,5 +1,6 @@
-"""A run folder or report that lacks what this dv2s-gym writes is refused in one line naming it and the fix
-(rerun with a new ``--out``); no older layout is read on."""
+"""A run folder whose record is of another format than this dv2s-gym writes (or of none) is refused in one line
+naming the folder, what it holds and the fix (start a new ``--out`` folder), for every resumable run kind; a folder
+this dv2s-gym wrote resumes. No older layout is read on."""
 
 from __future__ import annotations
 
@@ -7,66 +8,172 @@ import json
 
 import pytest
 
+import dv2s_gym.mining.space as space_module
 from loop_helpers import run_loop
+from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.loop_settings import LoopError
-from dv2s_gym.regress.errors import ReportMismatchError
+from dv2s_gym.mining.miner import SETTINGS_VERSION, _recorded, mine
+from dv2s_gym.mining.settings import MineSettings
+from dv2s_gym.regress.errors import ReportMismatchError, ResumeMismatchError
 from dv2s_gym.regress.report import SCHEMA, SCHEMA_VERSION, load_report
+from dv2s_gym.regress.store import RunStore
+from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, DAggerResumeError
+from policies.training import TrainConfig, TrainingError, run_settings, train
+
+SCENARIOS = ("highway_lead_vehicle_brakes",)
 
 _ERRORED = {"episodes": 1, "scenarios": {"s": 1}, "messages": {"s": [{"message": "boom", "count": 1}]},
             "examples": {"s": "boom"}}
 
 
-def _loop_json(tmp_path, settings, steps=None):
+def _refusal(folder, what: str, file: str, found: str, reads: int) -> str:
+    return (f"{folder} holds {what} written by another version of dv2s-gym (its {file} records {found}, this "
+            f"dv2s-gym reads format {reads}); start a new --out folder")
+
+
+class _SpaceBuilt(Exception):
+    pass
+
+
+@pytest.fixture
+def mining_folder(tmp_path, monkeypatch):
+    """A mining run folder whose settings.json a seed-0 run wrote; building a scene space raises
+    :class:`_SpaceBuilt` (the resume checks are behind it)."""
+    out = tmp_path / "mine"
+    (out / "traces").mkdir(parents=True)
+    recorded = _recorded("rule", MineSettings(budget=2, scenarios=SCENARIOS, seed=0, batch=4), SCENARIOS, {})
+    (out / "settings.json").write_text(json.dumps(recorded), encoding="utf-8")
+
+    def no_space(*args, **kwargs):
+        raise _SpaceBuilt()
+
+    monkeypatch.setattr(space_module, "SceneSpace", no_space)
+    return out
+
+
+def _mine(out):
+    mine("rule", MineSettings(budget=2, scenarios=SCENARIOS, seed=0), out=out, progress=False, reports=False)
+
+
+@pytest.mark.parametrize("change, found", [({"version": SETTINGS_VERSION - 1}, f"format {SETTINGS_VERSION - 1}"),
+                                           ({"version": None}, "no format"), ({"schema": None}, "no format")])
+def test_a_mining_folder_of_another_format_is_refused_and_one_of_this_format_resumes(mining_folder, change, found):
+    with pytest.raises(_SpaceBuilt):  # past the resume checks
+        _mine(mining_folder)
+    path = mining_folder / "settings.json"
+    path.write_text(json.dumps({**json.loads(path.read_text(encoding="utf-8")), **change}), encoding="utf-8")
+    with pytest.raises(MiningError) as error:
+        _mine(mining_folder)
+    assert str(error.value) == _refusal(mining_folder, "a mining run", "settings.json", found, SETTINGS_VERSION)
+
+
+@pytest.mark.parametrize("record", [
+    {"settings": {"holdout_by": "family"}, "start": None, "rounds": []},
+    {"schema": "dv2s-loop-state", "version": 0, "settings": {}, "start": None, "rounds": []},
+    {"schema": "dv2s-loop-state", "settings": {"holdout_by": "family"}, "start": None,
+     "rounds": [{"round": 1, "steps": {"mine": {"errored": _ERRORED}}, "timings": {}}]},
+])
+def test_a_loop_folder_of_another_format_is_refused_in_one_line(tmp_path, record):
     folder = tmp_path / "loop"
     folder.mkdir()
-    rounds = [] if steps is None else [{"round": 1, "steps": steps, "timings": {}}]
-    (folder / "loop.json").write_text(json.dumps({"settings": settings, "start": None, "rounds": rounds}))
-    return folder
-
-
-@pytest.mark.parametrize("settings, steps, what", [
-    ({}, None, "records holdout_by None, not 'family'"),
-    ({"holdout_by": "cluster"}, None, "records holdout_by 'cluster', not 'family'"),
-    ({"holdout_by": "family"}, {"mine": {"episodes": 3, "errors": 1}}, "round 1's mining step records no errored"),
-    ({"holdout_by": "family"}, {"mine": {"errored": {"episodes": 1, "scenarios": {"s": 1}, "examples": {"s": "x"}}}},
-     "round 1's 'mine' step records its errored episodes without every message"),
-    ({"holdout_by": "family"}, {"mine": {"errored": _ERRORED}, "untouched": {"errored": {"fine_tuned": {
-        **_ERRORED, "unlisted": {"s": {"messages": 3, "episodes": 5}}}}}},
-     "round 1's 'untouched' step records its errored episodes without every message"),
-    ({"holdout_by": "family"}, {"after": {"pairs": 1, "heldout_families": 1, "table": {"after_only": 1}}},
-     "round 1's held-out step records no held-out tests with their families' harm check"),
-    ({"holdout_by": "family"}, {"after": {"pairs": 9, "significantly_worse": {"start": {"worse": False}}}},
-     "round 1's held-out step records no held-out tests with their families' harm check"),
-])
-def test_a_loop_folder_of_an_older_layout_is_refused_in_one_line(tmp_path, settings, steps, what):
-    folder = _loop_json(tmp_path, settings, steps)
+    (folder / "loop.json").write_text(json.dumps(record))
     with pytest.raises(LoopError) as error:
         run_loop("dv2s-ppo", out=folder, budget=8, log=lambda _: None, progress=False)
-    message = str(error.value)
-    assert "\n" not in message and message.startswith(f"{folder} was written by an older dv2s-gym (")
-    assert what in message and message.endswith("rerun with a new --out")
+    found = f"format {record['version']}" if "version" in record else "no format"
+    assert str(error.value) == _refusal(folder, "a loop", "loop.json", found, 1)
 
 
-def test_a_regress_report_without_its_failure_kinds_is_refused(tmp_path):
+class _PastTheCheck(Exception):
+    pass
+
+
+def _past_the_check(line: str) -> None:
+    if "holds no checkpoint yet" in line:  # past the resume checks (the run had not reached its first checkpoint)
+        raise _PastTheCheck()
+
+
+def test_a_training_folder_of_another_format_is_refused_and_one_of_this_format_resumes(tmp_path):
+    """A resumed run with unchanged settings resumes: its fine-tuning settings, ``None`` and left out of
+    ``run.json``, are ``None`` on both sides."""
+    out = tmp_path / "run"
+    out.mkdir()
+    config = TrainConfig(out=str(out), algo="ppo", scenarios=SCENARIOS, steps=300, n_envs=1, eval_freq=0,
+                         card_seeds=0, checkpoint_freq=0, progress_bar=False, vec_env="dummy")
+    assert "learning_rate" not in config.to_json()
+    path = out / "run.json"
+    path.write_text(json.dumps({"schema": "dv2s-train-run", "version": 1, "config": config.to_json(),
+                                "segments": []}), encoding="utf-8")
+    with pytest.raises(_PastTheCheck):
+        train(run_settings(out, {}, resume=True), resume=True, log=_past_the_check)
+    for record, found in (({"config": config.to_json(), "segments": []}, "no format"),
+                          ({"schema": "dv2s-train-run", "version": 0, "config": config.to_json(), "segments": []},
+                           "format 0")):
+        path.write_text(json.dumps(record), encoding="utf-8")
+        with pytest.raises(TrainingError) as error:
+            run_settings(out, {}, resume=True)
+        assert str(error.value) == _refusal(out, "a training run", "run.json", found, 1)
+
+
+_PROGRESS = {"schema": "dv2s-dagger-checkpoint", "identity": {"seed": 0}, "iteration": 0, "history": [], "rng": {},
+             "envs": [], "partial": None}
+
+
+@pytest.mark.parametrize("format_keys, found", [({"schema_version": 1}, "no format"), ({"version": 1}, "format 1"),
+                                                ({"version": 2}, None)])
+def test_a_dagger_checkpoint_of_another_format_is_refused(tmp_path, format_keys, found):
+    folder = tmp_path / CHECKPOINT_DIR
+    folder.mkdir()
+    (folder / "progress.json").write_text(json.dumps({**_PROGRESS, **format_keys}))
+    checkpoint = DAggerCheckpoint(folder, {"seed": 0})
+    if found is None:  # this format: the settings are compared, and match
+        assert checkpoint.load().iteration == 0
+        return
+    with pytest.raises(DAggerResumeError) as error:
+        checkpoint.load()
+    assert str(error.value) == _refusal(folder, "the checkpoint of an unfinished DAgger run", "progress.json", found, 2)
+
+
+@pytest.mark.parametrize("format_keys, found", [({"version": 1}, "format 1"), ({}, "no format")])
+def test_a_regression_folder_of_another_format_is_refused_and_one_of_this_format_resumes(tmp_path, format_keys,
+                                                                                          found):
+    settings = {"episodes": 4, "seed": 0, "scenarios": ["a"]}
+    with RunStore(tmp_path, settings) as store:
+        assert store.open() == {}
+    with RunStore(tmp_path, settings) as store:
+        assert store.open() == {}  # this format, the same settings: resumed
+    path = tmp_path / "run.json"
+    record = {key: value for key, value in json.loads(path.read_text()).items() if key != "version"}
+    path.write_text(json.dumps({**record, **format_keys}))
+    with pytest.raises(ResumeMismatchError) as error, RunStore(tmp_path, settings) as store:
+        store.open()
+    assert str(error.value) == _refusal(tmp_path, "a regression run", "run.json", found, 2)
+
+
+def test_a_regress_report_of_another_schema_version_is_refused(tmp_path):
     path = tmp_path / "report.json"
-    report = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION, "settings": {"seed": 0, "episodes": 2}}
-    path.write_text(json.dumps(report))
+    path.write_text(json.dumps({"schema": SCHEMA, "schema_version": SCHEMA_VERSION - 1,
+                                "settings": {"seed": 0, "episodes": 2}}))
     with pytest.raises(ReportMismatchError) as error:
         load_report(path)
     message = str(error.value)
-    assert "\n" not in message and str(path) in message and "written by an older dv2s-gym" in message
-    assert "rerun that `dv2s regress` command with a new --out" in message
-    path.write_text(json.dumps({**report, "settings": {**report["settings"], "failure": ["collision"]}}))
-    assert load_report(path)["settings"]["failure"] == ["collision"]
+    assert "\n" not in message and str(path) in message
+    assert f"has schema version {SCHEMA_VERSION - 1}, this dv2s-gym reads version {SCHEMA_VERSION}" in message
 
 
 def test_the_older_paths_are_gone():
-    """No split by cluster, no failure kinds assumed for a report that names none, no anonymous error counts."""
+    """No split by cluster, no failure kinds assumed for a report that names none, no anonymous error counts, no
+    defaults for settings a record lacks, no family made up for a record without one."""
     from dv2s_gym.mining import errored, split
+    from dv2s_gym.mining.family import record_family
     from dv2s_gym.regress import failures
+    from scenario_bank import run_identity
     from scenario_bank.failure_types import FailureType
+    from scenario_bank.records import EpisodeRecord
 
     assert not hasattr(split, "split_by_cluster") and not hasattr(failures, "FAILURE_BEFORE_CHOICE")
+    assert not hasattr(run_identity, "setting_defaults")
     assert "counted_before_choice" not in FailureType.__dataclass_fields__
     merged = errored.merged_messages([_ERRORED, _ERRORED])
     assert merged == {"s": [{"message": "boom", "count": 2}]}
+    with pytest.raises(MiningError, match="episode 3 of s records no scenario family"):
+        record_family(EpisodeRecord(index=3, scenario="s", seed=0))

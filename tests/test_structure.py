@@ -381,8 +381,10 @@ NAMED_NOT_LOADED: Dict[Tuple[str, str], str] = {
                                       "driver is loaded by the name its caller sends, COMPUTED_LOADS)",
     ("dv2s_gym.regress.identity", "envs"): "the project's packages whose sources it hashes (paths)",
     ("dv2s_gym.regress.identity", "policies"): "the project's packages whose sources it hashes (paths)",
-    ("dv2s_gym.regress.identity", "scenario_bank"): "the project's packages whose sources it hashes (paths)",
-    ("dv2s_gym.regress.identity", "dv2s_gym"): "the project's packages whose sources it hashes (paths)",
+    ("policies.run_identity", "envs"): "the project's packages whose files are not a policy's helpers (paths)",
+    ("policies.run_identity", "scenario_bank"): "the project's packages whose files are not a policy's helpers "
+                                                "(paths)",
+    ("policies.run_identity", "dv2s_gym"): "the project's packages whose files are not a policy's helpers (paths)",
     ("policies.training", "envs"): "the name of the --envs option in a check of the settings",
 }
 """``(module, project module)`` -> why a string in the module naming that project module does not load it (a

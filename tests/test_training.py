@@ -24,10 +24,8 @@ from policies.training import (
     TrainingError,
     latest_checkpoint,
     make_vec_env,
-    run_settings,
     train,
 )
-from scenario_bank.run_identity import RunIdentityError
 
 SCENARIOS = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
 TINY = ["--hp", "n_steps=64", "--eval-freq", "128", "--eval-seeds", "1", "--card-seeds", "1", "--baselines",
@@ -464,26 +462,3 @@ def test_the_card_evaluation_says_how_long_it_has_left_once_its_first_episodes_a
     now[0] += 10.0
     left.update(4)
     assert lines == ["model card evaluation: 16 of 288 episodes in 70 s; about 20 min left"]
-
-
-class _PastTheCheck(Exception):
-    pass
-
-
-def test_a_setting_the_run_did_not_record_is_its_default(tmp_path):
-    """A run folder written before a setting existed resumes with the setting's default and refuses another value."""
-    out = tmp_path / "run"
-    out.mkdir()
-    config = _tiny_config(out, "ppo").to_json()
-    del config["curriculum_floor"]
-    (out / "run.json").write_text(json.dumps({"config": config, "segments": []}))
-
-    def log(line: str) -> None:
-        if "holds no checkpoint yet" in line:  # past the resume check (this run had not reached its first checkpoint)
-            raise _PastTheCheck()
-
-    with pytest.raises(RunIdentityError, match=r"\(curriculum_floor: run has 0.25 \(not recorded: the default\), "
-                                            r"asked 0.5\)"):
-        train(run_settings(out, {"curriculum_floor": 0.5}, resume=True), resume=True, log=log)
-    with pytest.raises(_PastTheCheck):
-        train(run_settings(out, {}, resume=True), resume=True, log=log)

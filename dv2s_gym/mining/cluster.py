@@ -3,7 +3,7 @@
 A failure's cluster is ``"<family>/<failure class>/<actor>-<its manoeuvre>/ego-<ego manoeuvre>"``, e.g.
 ``"cut_in/collision:rear_end/car-braking/ego-keeping_lane"``: its scenario family (the bank scenario the
 episode's scenario goes back to through the provenance of mined and replay entries,
-:mod:`dv2s_gym.mining.family`; a record written without a ``family`` uses its scenario), its class (``collision:rear_end``, ``off_road``, ``stall``...;
+:mod:`dv2s_gym.mining.family`), its class (``collision:rear_end``, ``off_road``, ``stall``...;
 :attr:`~dv2s_gym.mining.monitors.Failure.kind`), the kind of the other actor involved and what it was doing,
 and what the ego was doing, in the seconds before the failure (:mod:`dv2s_gym.mining.behaviour`, kept in
 the episode record when it runs). The first two ``/``-parts are always the family and the failure class; the

@@ -28,7 +28,7 @@ from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
 from dv2s_gym.mining.scenic_values import read_support, support_contains, support_text
 from dv2s_gym.mining.scene_draws import inline_draws
 from dv2s_gym.regress import identity
-from dv2s_gym.regress.identity import checkpoint_path, installed_version
+from policies.run_identity import checkpoint_path, installed_version
 from envs.trace import TRACE_VERSION
 from pathlib import Path
 from scenario_bank.atomic import file_sha256
@@ -182,13 +182,10 @@ def mismatch_reason(recorded: Mapping[str, Any], current: Mapping[str, Any]) -> 
     """Why a replay whose trajectory differs from ``recorded`` (a replay entry's provenance ``replay``) may not
     match, given the ``current`` :func:`replay_versions`: what changed since, or, with everything the same, that
     the episode really diverged."""
-    if not any(key in recorded for key, _ in _VERSION_FACTS):
-        return ("the entry records no policy checkpoint or dv2s-gym version (made by an older dv2s-gym), so the "
-                "cause cannot be told: another checkpoint, another dv2s-gym, or a real divergence")
     changed = []
     for key, text in _VERSION_FACTS:
         then, now = recorded.get(key), current.get(key)
-        if key in recorded and then != now:
+        if then != now:
             short = (lambda v: str(v)[:12]) if key.endswith("sha256") else str
             changed.append(text.format(now=short(now), then=short(then)))
     if changed:

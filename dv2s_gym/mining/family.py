@@ -13,6 +13,7 @@ import os
 from functools import lru_cache
 from typing import Dict, Optional, Tuple
 
+from dv2s_gym.mining.errors import MiningError
 from scenario_bank.bank import Bank
 from scenario_bank.errors import BankError
 from scenario_bank.families import content_families
@@ -60,5 +61,12 @@ def _families(bank_dir: Optional[str], stamp: Tuple[int, ...]) -> Optional[Dict[
 
 
 def record_family(record: EpisodeRecord) -> str:
-    """An episode record's family: its ``family`` field, or its scenario for records written without one."""
-    return str(record.family or record.scenario)
+    """An episode record's family (its ``family`` field, which every mined episode records).
+
+    Raises:
+        MiningError: the record has none (a record no mining run of this dv2s-gym writes).
+    """
+    if not record.family:
+        raise MiningError(f"episode {record.index} of {record.scenario} records no scenario family: it was not "
+                          "written by a mining run of this version of dv2s-gym; start a new --out folder")
+    return str(record.family)

@@ -98,10 +98,10 @@ from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
 from scenario_bank.records import EpisodeRecord, RecordError
-from scenario_bank.run_identity import check_identity
-from dv2s_gym.regress.identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
+from scenario_bank.run_identity import check_format, check_identity, record_format
 from policies.evaluation import EVAL_SEED_BASE
 from policies.registry import SB3_ALGORITHMS, read_model_card
+from policies.run_identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
 
 __all__ = ["LoopError", "LoopReport", "LoopSettings", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries",
            "fine_tune_weights", "arm_weights", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES"]
@@ -112,8 +112,10 @@ DEFAULT_OUT = "out/loop"
 IDENTITY = ("policy",) + LoopSettings.resume_keys()
 """The settings of ``loop.json`` a resumed loop must share with the recorded ones."""
 HOLDOUT_BY = "family"
-"""How a loop splits its mined scenarios (recorded in ``loop.json``; a loop folder recording another way was
-written by an older dv2s-gym and is refused)."""
+"""How a loop splits its mined scenarios (recorded in ``loop.json``)."""
+STATE_SCHEMA = "dv2s-loop-state"
+STATE_VERSION = 1
+"""The format of ``loop.json`` (bumped when its fields change; a loop folder of another format is refused)."""
 
 UNTOUCHED_BANK = Path(__file__).resolve().parent / "untouched"
 """The scenario set no loop mines or fine-tunes on: a bank folder of scripts written by others for Scenic's
@@ -162,17 +164,18 @@ class _State:
             except ValueError as error:
                 raise LoopError(f"{path} is not readable JSON ({error}); choose another --out") from error
             _check_structure(data, path)
-            recorded = data.get("settings", {})
-            check_identity(recorded, settings, IDENTITY, run=f"{path.parent} holds a loop", defaults=LoopSettings,
+            check_format(data, STATE_SCHEMA, STATE_VERSION, folder=path.parent, what="a loop", file=path.name,
+                         error=LoopError)
+            recorded = data["settings"]
+            check_identity(recorded, settings, IDENTITY, run=f"{path.parent} holds a loop",
                            fix="rerun with its settings to resume it, or choose another --out")
             # the same spec naming a checkpoint replaced in place is refused, naming what changed
             check_policy_unchanged(recorded, settings["policy"], folder=path.parent, run="loop", error=LoopError)
-            # what may change on a resume, and a setting the loop did not record yet (its default, checked above)
-            data["settings"].update({k: settings[k] for k in settings
-                                     if k not in recorded or k not in IDENTITY})
+            data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY})  # what may change
             self.data = data
         else:
-            self.data = {"settings": settings, "start": None, "rounds": []}
+            self.data = {**record_format(STATE_SCHEMA, STATE_VERSION), "settings": settings, "start": None,
+                         "rounds": []}
         self.rounds: List[RoundRecord] = _read_rounds(self.data.pop("rounds"), path)
 
     def save(self) -> None:
@@ -226,36 +229,6 @@ def _check_structure(data: Any, path: Path) -> None:
     if problem:
         raise LoopError(f"{path} is not a dv2s loop record ({problem}); choose another --out, or delete the file "
                         "to start the loop over")
-    older = _older_problem(data)
-    if older:
-        raise LoopError(f"{path.parent} was written by an older dv2s-gym ({older}); rerun with a new --out")
-
-
-_ERRORED_BY_POLICY = ("after", "untouched", "regress")
-"""The steps of a round that record their errored episodes per policy (``mine`` and ``before`` record one)."""
-
-
-def _older_problem(data: Mapping[str, Any]) -> Optional[str]:
-    """What in a ``loop.json`` this version does not write (``None``: nothing): a split other than by family,
-    errored episodes recorded without every message counted, or held-out comparisons without their recorded tests
-    (``significantly_worse``, each test with its families' harm check)."""
-    if data["settings"].get("holdout_by") != HOLDOUT_BY:
-        return f"its loop.json records holdout_by {data['settings'].get('holdout_by')!r}, not {HOLDOUT_BY!r}"
-    for number, record in enumerate(data["rounds"], start=1):
-        steps = record.get("steps", {})
-        if isinstance(steps.get("mine"), dict) and "errored" not in steps["mine"]:
-            return f"round {number}'s mining step records no errored episodes"
-        after = steps.get("after")
-        if isinstance(after, dict) and (not isinstance(after.get("significantly_worse"), dict) or any(
-                isinstance(test, dict) and "family_harm" not in test for test in after["significantly_worse"].values())):
-            return f"round {number}'s held-out step records no held-out tests with their families' harm check"
-        for step, value in steps.items():
-            if not isinstance(value, dict) or not isinstance(value.get("errored"), dict):
-                continue
-            found = value["errored"].values() if step in _ERRORED_BY_POLICY else [value["errored"]]
-            if any(isinstance(f, dict) and ("messages" not in f or "unlisted" in f) for f in found):
-                return f"round {number}'s {step!r} step records its errored episodes without every message"
-    return None
 
 
 _ROUND_TEXTS = ("policy", "new_policy", "control_policy", "next_policy", "next_policy_reason")
@@ -545,7 +518,7 @@ def _recorded_settings(policy: str, settings: LoopSettings, workers: int, env_co
                        fine_tune_config: Dict[str, Any]) -> Dict[str, Any]:
     """The ``settings`` of ``loop.json``: :meth:`LoopSettings.recorded` with the policy, the resolved number of
     workers, how mined scenarios are held out and the env configs (the keys :data:`IDENTITY` names are the loop's
-    identity) and the starting policy's fingerprint (:func:`~dv2s_gym.regress.identity.resume_fingerprint`)."""
+    identity) and the starting policy's fingerprint (:func:`~policies.run_identity.resume_fingerprint`)."""
     return {"policy": policy, **settings.recorded(), "workers": workers, "holdout_by": HOLDOUT_BY,
             "env_config": env_config, "fine_tune_env_config": fine_tune_config,
             RESUME_FINGERPRINT: resume_fingerprint(policy)}

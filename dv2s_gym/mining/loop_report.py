@@ -1065,12 +1065,6 @@ def _entry_clips(entry: MinedEntry, folder: Path, mine: MiningSummary, policy: O
                 found.append((failure, label, prefix, note))
             if not replay and converted.is_file():
                 found.append((converted, clip_caption(scenario, provenance, merged=bool(prefix)), prefix, None))
-        listed = {video for video, *_ in found}
-        for video in sorted(folder.rglob("*.webm")):  # files no provenance names (an older entry's)
-            if video not in listed and video.name != ENTRY_CONVERTED_VIDEO:
-                where = video.parent.relative_to(folder)
-                found.append((video, f"failure of cluster {cluster}" if video.parent == folder
-                              else f"failure merged into it ({where})", str(where), None))
         if found:
             return found
     if mine.folder:  # the bank entry is gone: the mining run's copy

@@ -79,14 +79,17 @@ from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, RecordError
 from scenario_bank.failure_types import failure_table
 from scenario_bank.jail import JailUnavailableError, require_jail
-from scenario_bank.run_identity import check_identity
-from dv2s_gym.regress.identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
+from scenario_bank.run_identity import check_format, check_identity, record_format
 from policies.registry import load_policy
+from policies.run_identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
 
 __all__ = ["MineRun", "MineSettings", "RunOrigin", "WorkerSettings", "FEEDBACKS", "mine", "read_records",
            "episode_seed", "SETTINGS_VERSION", "progress_bar"]
 
-SETTINGS_VERSION = 1
+SETTINGS_SCHEMA = "dv2s-mine"
+SETTINGS_VERSION = 2
+"""The format of a mining run's ``settings.json`` (bumped when its fields change; a run folder of another format is
+refused on resume)."""
 LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
 _RESUME_KEYS = ("policy",) + MineSettings.resume_keys()
@@ -257,8 +260,8 @@ def _recorded(policy: str, settings: MineSettings, scenarios: Sequence[str],
               space_description: Dict[str, Any]) -> Dict[str, Any]:
     """The run's ``settings.json``: :meth:`MineSettings.recorded` (with the run's resolved batch and bank) with the
     policy, the ``scenarios`` (the keys :data:`_RESUME_KEYS` name are its identity) and the policy's fingerprint
-    (:func:`~dv2s_gym.regress.identity.resume_fingerprint`: a resume with a changed checkpoint or module is refused)."""
-    return {"schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, **settings.recorded(),
+    (:func:`~policies.run_identity.resume_fingerprint`: a resume with a changed checkpoint or module is refused)."""
+    return {**record_format(SETTINGS_SCHEMA, SETTINGS_VERSION), "policy": policy, **settings.recorded(),
             "batch": int(settings.batch), "scenarios": list(scenarios), "space": space_description,
             RESUME_FINGERPRINT: resume_fingerprint(policy)}
 
@@ -291,9 +294,12 @@ class _Mining:
 
 
 def _read_settings(out: Path) -> Optional[RunSettings]:
-    """The run folder's ``settings.json`` (``None`` when there is none); a damaged one is refused in one line
-    naming the file and the fix."""
+    """The run folder's ``settings.json`` (``None`` when there is none); a damaged one, or one of another format
+    (:data:`SETTINGS_VERSION`), is refused in one line naming the file and the fix."""
     saved = read_run_settings(out)
+    if saved is not None:
+        check_format(saved.values, SETTINGS_SCHEMA, SETTINGS_VERSION, folder=out, what="a mining run",
+                     file=SETTINGS_FILE, error=MiningError)
     if saved is not None and saved.scenarios is None:
         raise MiningError(f"{saved.path} is not a mining run's settings (no list of scenarios); restore it, or choose "
                           "another --out (or delete the run folder) to start the run over")
@@ -302,7 +308,7 @@ def _read_settings(out: Path) -> Optional[RunSettings]:
 
 def _check_resume(saved: Mapping[str, Any], settings: Dict[str, Any], out: Path,
                   keys: Sequence[str] = _RESUME_KEYS) -> None:
-    check_identity(saved, settings, keys, run=f"{out} holds a mining run", defaults=MineSettings,
+    check_identity(saved, settings, keys, run=f"{out} holds a mining run",
                    fix="resume it with the same settings or pass another --out")
 
 

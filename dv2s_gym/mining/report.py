@@ -107,7 +107,7 @@ from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, by_type_
 from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.settings import read_run_settings, RunSettings, SETTINGS_FILE
 from dv2s_gym.mining.report_text import percent_text as _pct
-from dv2s_gym.regress.identity import installed_version
+from policies.run_identity import installed_version
 from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.failure_types import FAILURE_TYPES, severity_order

@@ -9,42 +9,31 @@
 - the spec's options, typed and sorted, and the bytes (SHA-256) of every option value that names an
   existing file (``?weights=weights.json``);
 - the user's own modules the policy may use: every ``.py`` file beside a ``module:attribute``
-  policy's module (its package's tree when it is in a package; at most :data:`MAX_HELPER_FILES`), and
-  every module loaded in this process from under that folder, leaving out the standard library,
-  site-packages and dv2s's own packages;
+  policy's module (its package's tree when it is in a package; at most
+  :data:`~policies.run_identity.MAX_HELPER_FILES`), and every module loaded in this process from under that
+  folder, leaving out the standard library, site-packages and dv2s's own packages;
 - the dv2s version and one SHA-256 of dv2s's simulator, regression and policy sources (``envs/``,
   ``dv2s_gym/regress/``, ``policies/``), so an edited editable install is noticed.
 
-A run's output folder records them (``run.json``); resuming with a changed checkpoint, module or
-options under the same spec is refused, naming what changed.
+All but that last SHA-256 are :func:`policies.run_identity.resume_fingerprint`, the policy half of every
+resumable run's identity. A regression run's output folder records them all (``run.json``); resuming with a
+changed checkpoint, module or options under the same spec, or with edited dv2s sources, is refused, naming what
+changed.
 """
 
 from __future__ import annotations
 
 import hashlib
-import importlib.util
-import json
-import sys
-import sysconfig
 from pathlib import Path
-from typing import Any, Dict, Iterable, List, Mapping, Optional
-from importlib import metadata
+from typing import Any, Dict
 
 from scenario_bank.atomic import file_sha256
-from policies.registry import (SB3_ALGORITHMS, SHIPPED_CHECKPOINT, parse_spec, registered_policies,
-                               registered_policy_module)
+from policies.run_identity import resume_fingerprint
 
-__all__ = ["policy_fingerprint", "checkpoint_path", "installed_version", "file_sha256", "dv2s_sources_sha256",
-           "MAX_HELPER_FILES", "RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes",
-           "check_policy_unchanged"]
-
-MAX_HELPER_FILES = 500
-"""At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
+__all__ = ["policy_fingerprint", "dv2s_sources_sha256"]
 
 _DV2S_ROOT = Path(__file__).resolve().parents[2]
-_DV2S_PACKAGES = ("envs", "dv2s_gym", "policies", "scenario_bank")
 _DV2S_SOURCES = ("envs", "dv2s_gym/regress", "policies")
-_SKIPPED_DIRS = {"__pycache__", "site-packages", "dist-packages", "node_modules"}
 
 
 def dv2s_sources_sha256() -> str:
@@ -59,148 +48,9 @@ def dv2s_sources_sha256() -> str:
     return digest.hexdigest()
 
 
-def _outside_user_code() -> List[Path]:
-    roots = {sysconfig.get_paths()[key] for key in ("stdlib", "platstdlib", "purelib", "platlib")}
-    return [Path(r).resolve() for r in roots if r] + [_DV2S_ROOT / p for p in _DV2S_PACKAGES]
-
-
-def _is_under(path: Path, roots: Iterable[Path]) -> bool:
-    return any(path == root or root in path.parents for root in roots)
-
-
-def _helper_files(module_file: Path, module: str) -> List[Path]:
-    """The user's ``.py`` files a ``module:attribute`` policy may use (see the module docstring)."""
-    folder = module_file.resolve().parent
-    for _ in range(module.count(".")):  # a package's tree starts at its top-level folder
-        folder = folder.parent
-    excluded = _outside_user_code()
-    found = set()
-    if module.count("."):
-        candidates = (p for p in folder.rglob("*.py") if not (_SKIPPED_DIRS & set(p.parts)))
-    else:
-        candidates = folder.glob("*.py")
-    for path in candidates:
-        if len(found) >= MAX_HELPER_FILES:
-            break
-        found.add(path.resolve())
-    for loaded in list(sys.modules.values()):
-        name = getattr(loaded, "__file__", None)
-        if not name or not str(name).endswith(".py"):
-            continue
-        path = Path(name).resolve()
-        if folder in path.parents and path.is_file():
-            found.add(path)
-    return sorted(p for p in found if p.is_file() and not _is_under(p, excluded))
-
-
-def _module_file(name: str) -> Optional[Path]:
-    try:
-        spec = importlib.util.find_spec(name)
-    except (ImportError, ValueError):
-        return None
-    origin = getattr(spec, "origin", None) if spec is not None else None
-    if origin and Path(origin).is_file():
-        return Path(origin)
-    here = Path.cwd() / Path(*name.split("."))  # load_policy finds a module:attribute policy in this folder too
-    for path in (here.with_suffix(".py"), here / "__init__.py"):
-        if path.is_file():
-            return path
-    return None
-
-
-def installed_version() -> str:
-    """The installed dv2s-gym distribution's version (``"unknown"`` when run from a source tree without one)."""
-    try:
-        return metadata.version("dv2s-gym")
-    except metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
-        return "unknown"
-
-
-def checkpoint_path(base: str) -> Optional[Path]:
-    """The checkpoint file a policy spec's base names (``dv2s-ppo``, ``model.zip``, ``ppo:PATH``, a folder holding
-    ``model.zip``), ``None`` for a driver or a ``module:attribute`` policy."""
-    if base == "dv2s-ppo":
-        return SHIPPED_CHECKPOINT
-    prefix, sep, rest = base.partition(":")
-    if sep and prefix.lower() in SB3_ALGORITHMS:
-        base = rest
-    path = Path(base)
-    if path.is_dir():
-        path = path / "model.zip"
-    return path if path.suffix == ".zip" or (sep and prefix.lower() in SB3_ALGORITHMS) else None
-
-
 def policy_fingerprint(spec: str) -> Dict[str, Any]:
-    """``{description: value}`` facts of a policy spec (see the module docstring); every key names what it is."""
-    base, options = parse_spec(spec)
-    facts: Dict[str, Any] = {"options": json.dumps(options, sort_keys=True, default=str),
-                             "dv2s version": installed_version(), "dv2s sources (SHA-256)": dv2s_sources_sha256()}
-    for key, value in sorted(options.items()):
-        if isinstance(value, str) and value and Path(value).is_file():
-            facts[f"option {key} file {value} (SHA-256)"] = file_sha256(Path(value))
-    checkpoint = checkpoint_path(base)
-    if checkpoint is not None:
-        resolved = checkpoint.resolve()
-        facts[f"checkpoint {checkpoint} (SHA-256)"] = file_sha256(resolved) if resolved.is_file() else "missing"
-        card = resolved.parent / "model_card.json"
-        if card.is_file():
-            facts[f"model card {card} (SHA-256)"] = file_sha256(card)
-    elif base in registered_policies():
-        module = registered_policy_module(base)
-        found = _module_file(module) if module else None
-        if found is not None:
-            facts[f"module {module} source (SHA-256)"] = file_sha256(found)
-    elif ":" in base:
-        module = base.partition(":")[0]
-        found = _module_file(module)
-        facts[f"module {module} source (SHA-256)"] = file_sha256(found) if found else "not found"
-        if found is not None:
-            for helper in _helper_files(found, module):
-                if helper != found.resolve():
-                    facts[f"module file {helper} (SHA-256)"] = file_sha256(helper)
-    return facts
-
-
-RESUME_FINGERPRINT = "policy_fingerprint"
-"""The key under which a resumable run's settings record :func:`resume_fingerprint` of its policy."""
-
-
-def resume_fingerprint(spec: str) -> Dict[str, Any]:
-    """What a resumed run must find unchanged in its policy: :func:`policy_fingerprint` without the one SHA-256 of
-    dv2s's own sources (the checkpoint's bytes, a ``module:attribute`` policy's source and its helper files, a
-    registered driver's module, the options and the dv2s version)."""
-    facts = policy_fingerprint(spec)
-    facts.pop("dv2s sources (SHA-256)", None)
-    return facts
-
-
-def fingerprint_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[str]:
-    """``"<fact>: run has <old>, now <new>"`` for every fact of two fingerprints that differs (sorted)."""
-    def show(value: Any) -> str:
-        text = "absent" if value is None else str(value)
-        return text[:12] if len(text) == 64 else text
-    keys = sorted(set(recorded) | set(now))
-    return [f"{key}: run has {show(recorded.get(key))}, now {show(now.get(key))}" for key in keys
-            if recorded.get(key) != now.get(key)]
-
-
-def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: Any, run: str,
-                           error: type) -> Dict[str, Any]:
-    """The policy's :func:`resume_fingerprint`, after checking it against the one ``recorded`` (the settings of the
-    ``run``, e.g. ``"mining run"``, in ``folder``).
-
-    Raises:
-        error: ``"<folder> was written by an older dv2s-gym (...); rerun with a new --out"`` when ``recorded`` has
-            no fingerprint; ``"<folder> holds a <run> of <spec> whose policy has changed since (<fact>: run has
-            ..., now ...); restore the policy ..., or pass a new --out"`` when a fact differs.
-    """
-    now = resume_fingerprint(spec)
-    if RESUME_FINGERPRINT not in recorded:
-        raise error(f"{folder} was written by an older dv2s-gym (its settings record no fingerprint of the policy); "
-                    "rerun with a new --out")
-    changes = fingerprint_changes(dict(recorded[RESUME_FINGERPRINT] or {}), now)
-    if changes:
-        raise error(f"{folder} holds a {run} of {spec} whose policy has changed since ({'; '.join(changes[:3])}"
-                    f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the policy "
-                    "(its checkpoint or module as the run used it), or pass a new --out")
-    return now
+    """``{description: value}`` facts of a policy spec (see the module docstring); every key names what it is:
+    :func:`~policies.run_identity.resume_fingerprint` with the one SHA-256 of dv2s's own sources."""
+    facts = resume_fingerprint(spec)
+    return {"options": facts.pop("options"), "dv2s version": facts.pop("dv2s version"),
+            "dv2s sources (SHA-256)": dv2s_sources_sha256(), **facts}

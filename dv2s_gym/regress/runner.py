@@ -39,7 +39,8 @@ from dv2s_gym.regress.report import (
     paired_tables,
 )
 from dv2s_gym.regress.outputs import write_reports
-from dv2s_gym.regress.identity import installed_version, policy_fingerprint
+from dv2s_gym.regress.identity import policy_fingerprint
+from policies.run_identity import installed_version
 from dv2s_gym.regress.store import RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
 from dv2s_gym.regress.tasks import KIND
@@ -58,7 +59,6 @@ from scenario_bank.shipped import is_shipped_text
 from scenario_bank.records import RecordError, RegressEpisode
 from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, RegressReport, SequentialOutcome
 from policies.registry import PolicySpaceError, load_policy
-from scenario_bank.run_identity import setting_defaults
 
 __all__ = ["run_regression", "run_size", "RegressSettings", "BaselineReport", "WorkerSettings", "bank_info",
            "plan_tasks", "DEFAULT_OUT", "ROLES"]
@@ -235,8 +235,7 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     settings = settings or RegressSettings()
     workers = workers or WorkerSettings()
     plan = _prepare(candidate, baseline, settings)
-    store = RunStore(Path(out_dir if out_dir is not None else DEFAULT_OUT), _identity(plan, settings),
-                     defaults=IDENTITY_DEFAULTS)
+    store = RunStore(Path(out_dir if out_dir is not None else DEFAULT_OUT), _identity(plan, settings))
     done = {key: result for key, result in store.open().items() if not result.get("error")}  # errors run again
     policies = {"candidate": candidate, **({"baseline": plan.baseline_spec} if plan.baseline_spec else {})}
     all_tasks = plan_tasks(policies, plan.names, plan.seeds, env_config=plan.env_config, bank_dir=plan.bank_dir,
@@ -362,11 +361,6 @@ def run_size(settings: RegressSettings) -> Tuple[int, int]:
     bank_dir = None if settings.bank_dir is None else str(Path(settings.bank_dir).resolve())
     names, episodes, _ = _size(settings, bank_dir, None, None)
     return len(names), episodes
-
-
-IDENTITY_DEFAULTS = setting_defaults(RegressSettings, ("seed", "sequential", "stall_seconds", "margin", "alpha"))
-"""The settings of a run's identity (:func:`_identity`) that are :class:`RegressSettings`' own values, as their
-defaults: what a run folder that does not record one compares as (the others are resolved values, no defaults)."""
 
 
 def _identity(plan: _Plan, settings: RegressSettings) -> Dict[str, Any]:

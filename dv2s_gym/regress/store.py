@@ -23,7 +23,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple, Union
 from dv2s_gym.regress.errors import RegressError, ResumeMismatchError
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.records import RecordError, RegressEpisode
-from scenario_bank.run_identity import check_identity
+from scenario_bank.run_identity import check_format, check_identity, record_format
 
 __all__ = ["RunStore", "RUN_FILE", "RESULTS_FILE", "TRACES_DIR", "describe_differences"]
 
@@ -31,7 +31,8 @@ RUN_FILE = "run.json"
 RESULTS_FILE = "results.jsonl"
 TRACES_DIR = "traces"
 _RUN_SCHEMA = "dv2s-regress-run"
-_RUN_VERSION = 1
+_RUN_VERSION = 2
+"""The format of ``run.json`` (bumped when its fields change; a run folder of another format is refused)."""
 
 Key = Tuple[str, str]  # (episode id, role)
 
@@ -57,18 +58,14 @@ class RunStore:
     Args:
         out_dir: the folder (created when missing).
         settings: the run's identity (JSON-safe dict); compared with ``run.json`` when the
-            folder already holds a run.
-        defaults: what a setting ``run.json`` does not record compares as (a run written before the
-            setting existed; :func:`~scenario_bank.run_identity.check_identity`).
+            folder already holds a run (of this format, :data:`_RUN_VERSION`).
         fsync: sync every appended line to disk (default), so not even a power loss loses
             a finished episode.
     """
 
-    def __init__(self, out_dir: Union[str, os.PathLike], settings: Dict[str, Any], fsync: bool = True, *,
-                 defaults: Optional[Mapping[str, Any]] = None) -> None:
+    def __init__(self, out_dir: Union[str, os.PathLike], settings: Dict[str, Any], fsync: bool = True) -> None:
         self.root = Path(out_dir)
         self.settings = json.loads(json.dumps(settings, sort_keys=True, default=str))
-        self.defaults = dict(defaults or {})
         self.fsync = fsync
         self.results_path = self.root / RESULTS_FILE
         self.traces_dir = self.root / TRACES_DIR
@@ -90,11 +87,13 @@ class RunStore:
             there = stored.get("settings") if isinstance(stored, dict) else None
             if not isinstance(there, dict) or stored.get("schema") != _RUN_SCHEMA:
                 raise RegressError(f"{run_file} was not written by dv2s regress; choose another --out")
+            check_format(stored, _RUN_SCHEMA, _RUN_VERSION, folder=self.root, what="a regression run",
+                         file=RUN_FILE, error=ResumeMismatchError)
             self._check_same_run(there)
         elif self.results_path.exists():
             raise RegressError(f"{self.results_path} exists without {RUN_FILE}; choose another --out or delete it")
         else:
-            atomic_write_json(run_file, {"schema": _RUN_SCHEMA, "version": _RUN_VERSION, "settings": self.settings})
+            atomic_write_json(run_file, {**record_format(_RUN_SCHEMA, _RUN_VERSION), "settings": self.settings})
         return self._read()
 
     def _check_same_run(self, there: Dict[str, Any]) -> None:
@@ -104,7 +103,7 @@ class RunStore:
         stale = [n for n in ("junit.xml", "report.html", "report.md", "report.json") if (self.root / n).is_file()]
         warning = (f"its reports ({', '.join(stale)}) are that run's, not this one's: nothing was written, so do "
                    "not read them as this run's verdict; " if stale else "")
-        check_identity(there, self.settings, sorted(set(there) | set(self.settings)), defaults=self.defaults,
+        check_identity(there, self.settings, sorted(set(there) | set(self.settings)),
                        run=f"{self.root} holds a regression run", error=ResumeMismatchError,
                        fix=f"{warning}rerun with the same settings to resume it, or choose another --out (or delete "
                            f"{self.root}) for a new run")
