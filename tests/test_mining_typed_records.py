@@ -71,8 +71,6 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "loop_report.errored_text": "takes errored episodes per policy (dv2s_gym.mining.errored.errored_episodes' JSON "
                                 "form, kept as loop.json holds it)",
     "loop_report.errored_note": "takes errored episodes (dv2s_gym.mining.errored.errored_episodes' JSON form)",
-    "loop_report.rate_text": "formats a held-out rate object of loop.json ({k, n, rate, low, high}, as "
-                             "dv2s_gym.mining.heldout writes it)",
     "loop_report.render_markdown": "renders the body of report.json",
     "loop_report.render_html": "renders the body of report.json",
     "loop_report.round_clips": "takes the body of report.json",

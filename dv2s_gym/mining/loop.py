@@ -1060,7 +1060,7 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     # the drop's interval resamples families, the unit the split holds out (scenarios of one family are not
     # independent); a scenario without a family stands for itself
     summary = paired_summary(before, after, seed=seed,
-                             families={name: (families or {}).get(name, name) for name in scenarios})
+                             families={name: (families or {}).get(name, name) for name in scenarios}).to_dict()
     summary["min_episodes"] = min_episodes
     summary["heldout_scenarios"] = len(scenarios)
     # a family counts only with a tested pair (no error on either side) in each held-out test: one whose episodes
@@ -1077,16 +1077,14 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     summary["failure_types"] = {"start": failure_types(before), "fine_tuned": failure_types(after)}
     if control is not None:
         versus = paired_summary(control, after, seed=seed, bootstrap=0)
-        table = versus["table"]
-        summary["control"] = versus["before"]
+        summary["control"] = versus.before.to_dict()
         summary["failure_types"]["control"] = failure_types(control)
-        summary["vs_control"] = {"pairs": versus["pairs"], "errors": versus["errors"],
-                                 "relative_drop": versus["relative_drop"],
-                                 "table": {"both_fail": table["both_fail"], "fine_tuned_only": table["after_only"],
-                                           "control_only": table["before_only"], "neither": table["neither"]},
-                                 "mcnemar_p": versus["mcnemar_p"],
-                                 "per_scenario": {name: row["before"]
-                                                  for name, row in versus["per_scenario"].items()}}
+        summary["vs_control"] = {"pairs": versus.pairs, "errors": versus.errors, "relative_drop": versus.relative_drop,
+                                 "table": {"both_fail": versus.table.both_fail,
+                                           "fine_tuned_only": versus.table.after_only,
+                                           "control_only": versus.table.before_only, "neither": versus.table.neither},
+                                 "mcnemar_p": versus.mcnemar_p,
+                                 "per_scenario": {name: row["before"] for name, row in versus.per_scenario.items()}}
     shortfall = underpowered(summary["pairs"], min_episodes, summary["heldout_families"], min_families, tested=True)
     if shortfall:
         summary["underpowered"] = shortfall

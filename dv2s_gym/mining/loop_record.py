@@ -25,13 +25,92 @@ from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 from scenario_bank.records import JsonRecord
 
-__all__ = ["RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
+__all__ = ["Rate", "PairedTable", "PairedSummary", "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
            "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
            "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS"]
 
 STEPS = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 """The steps of a round, in the order they run (a round that kept no mined scenario has ``skipped`` after
 ``split`` instead of the rest)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Rate(JsonRecord):
+    """A held-out failure rate: ``k`` failed episodes of ``n``, the ``rate`` (``None`` without an episode) and its
+    95 % Wilson interval ``low``..``high`` (:func:`dv2s_gym.mining.heldout.paired_summary`)."""
+
+    k: Optional[int] = None
+    n: Optional[int] = None
+    rate: Optional[float] = None
+    low: Optional[float] = None
+    high: Optional[float] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"k": "int", "n": "int", "rate": "number", "low": "number", "high": "number"}
+    _WHAT: ClassVar[str] = "rate"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+    def text(self) -> str:
+        """The rate as ``k/n = rate [low, high]`` (``-`` without an episode)."""
+        if self.rate is None:
+            return "-"
+        return f"{self.k}/{self.n} = {self.rate:.2f} [{self.low:.2f}, {self.high:.2f}]"
+
+
+@dataclass(frozen=True, eq=False)
+class PairedTable(JsonRecord):
+    """The paired held-out table of the fine-tuned policy (``after``) against the starting one (``before``): pairs
+    where both failed, only the fine-tuned one, only the start, neither."""
+
+    both_fail: Optional[int] = None
+    after_only: Optional[int] = None
+    before_only: Optional[int] = None
+    neither: Optional[int] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"both_fail": "int", "after_only": "int", "before_only": "int",
+                                        "neither": "int"}
+    _WHAT: ClassVar[str] = "paired table"
+
+
+@dataclass(frozen=True, eq=False)
+class PairedSummary(JsonRecord):
+    """Two policies' held-out episodes compared pair by pair (:func:`dv2s_gym.mining.heldout.paired_summary`):
+    ``pairs`` tested and ``errors`` left out, the rates ``before`` and ``after``, the ``relative_drop`` with its
+    bootstrap interval and what it resampled, the paired ``table`` and exact McNemar p, and each scenario's
+    counts (``per_scenario``: ``{scenario: {"n", "before", "after"}}``)."""
+
+    pairs: int = 0
+    errors: int = 0
+    before: Rate = field(default_factory=Rate)
+    after: Rate = field(default_factory=Rate)
+    relative_drop: Optional[float] = None
+    relative_drop_interval: Tuple[Any, ...] = (None, None)
+    relative_drop_interval_unit: Optional[str] = None
+    relative_drop_interval_units: Optional[int] = None
+    mcnemar_unit: Optional[str] = None
+    pairs_per_family: Optional[Mapping[str, int]] = None
+    table: PairedTable = field(default_factory=PairedTable)
+    mcnemar_p: Optional[float] = None
+    per_scenario: Mapping[str, Any] = field(default_factory=dict)
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "pairs": "int", "errors": "int", "before": "object", "after": "object", "relative_drop": "number",
+        "relative_drop_interval": "list", "relative_drop_interval_unit": "str", "relative_drop_interval_units": "int",
+        "mcnemar_unit": "str", "pairs_per_family": "object", "table": "object", "mcnemar_p": "number",
+        "per_scenario": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {"before": Rate, "after": Rate, "table": PairedTable}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("relative_drop_interval",)
+    _WHAT: ClassVar[str] = "paired summary"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"relative_drop", "mcnemar_p", "pairs_per_family"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -405,15 +484,15 @@ class HeldOutComparison(JsonRecord):
 
     pairs: Optional[int] = None
     errors: Optional[int] = None
-    before: Optional[Mapping[str, Any]] = None
-    after: Optional[Mapping[str, Any]] = None
+    before: Optional[Rate] = None
+    after: Optional[Rate] = None
     relative_drop: Optional[float] = None
     relative_drop_interval: Optional[Tuple[Any, ...]] = None
     relative_drop_interval_unit: Optional[str] = None
     relative_drop_interval_units: Optional[int] = None
     mcnemar_unit: Optional[str] = None
     pairs_per_family: Optional[Mapping[str, int]] = None
-    table: Optional[Mapping[str, int]] = None
+    table: Optional[PairedTable] = None
     mcnemar_p: Optional[float] = None
     per_scenario: Optional[Mapping[str, Any]] = None
     min_episodes: Optional[int] = None
@@ -422,7 +501,7 @@ class HeldOutComparison(JsonRecord):
     sampled_families: Optional[int] = None
     min_families: Optional[int] = None
     failure_types: Optional[ArmFailureTypes] = None
-    control: Optional[Mapping[str, Any]] = None
+    control: Optional[Rate] = None
     vs_control: Optional[VersusControl] = None
     underpowered: Optional[str] = None
     margin: Optional[float] = None
@@ -440,7 +519,8 @@ class HeldOutComparison(JsonRecord):
         "vs_control": "object", "underpowered": "str", "margin": "number", "significantly_worse": "object",
         "errored": "object",
     }
-    _NESTED: ClassVar[Dict[str, type]] = {"failure_types": ArmFailureTypes, "vs_control": VersusControl}
+    _NESTED: ClassVar[Dict[str, type]] = {"before": Rate, "after": Rate, "control": Rate, "table": PairedTable,
+                                          "failure_types": ArmFailureTypes, "vs_control": VersusControl}
     _LISTS: ClassVar[Tuple[str, ...]] = ("relative_drop_interval",)
     _WHAT: ClassVar[str] = "held-out comparison"
 
