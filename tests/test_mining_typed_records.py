@@ -43,13 +43,11 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "report.read_jsonl": "reads the JSON objects of a run's .jsonl files: the file format",
     "report.read_run": "returns the run's conversion records as read; their format is owned by the conversion "
                        "(dv2s_gym.mining.convert), which has no typed record for them yet",
-    "report.build_report": "returns the report's JSON object: the schema of report.json (module docstring)",
-    "report.build_report_from_records": "takes the run's settings.json and conversion records as read and returns "
-                                        "the report's JSON object",
-    "report.headline": "renders the report's JSON object (report.json)",
-    "report.format_summary": "renders the report's JSON object (report.json)",
-    "report.markdown": "renders the report's JSON object (report.json)",
-    "report.write_reports": "writes the report's JSON object (report.json) and its renderings",
+    "report.build_report_from_records": "takes the run's settings.json and conversion records as read",
+    "report.headline": "renders a MineReport or the JSON object report.json holds",
+    "report.format_summary": "renders a MineReport or the JSON object report.json holds",
+    "report.markdown": "renders a MineReport or the JSON object report.json holds",
+    "report.write_reports": "writes a MineReport, or the JSON object report.json holds, and its renderings",
     "rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
     "miner.convert_clusters": "returns the run's conversion records as conversions.jsonl holds them; their format "
                               "is owned by the conversion (dv2s_gym.mining.convert), which has no typed record for "
