@@ -54,8 +54,8 @@ JSON_BOUNDARIES: Dict[str, str] = {
                               "them yet",
     "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
     "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
-    "loop.heldout_comparison": "takes the held-out store's rows (heldout.jsonl) and returns the after step's JSON "
-                               "object, which the loop reads as a HeldOutComparison",
+    "loop.heldout_comparison": "takes the held-out store's rows (heldout.jsonl; HeldOutEpisode records or their "
+                               "JSON objects)",
     "loop.untouched_settings": "takes the policy's env config, a JSON object of its model card",
     "loop_record.HeldOutComparison.held_out_test": "returns one recorded held-out test (loop_verdict.heldout_worse's "
                                                    "JSON object in the after step's significantly_worse)",

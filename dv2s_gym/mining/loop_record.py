@@ -25,13 +25,55 @@ from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 from scenario_bank.records import JsonRecord
 
-__all__ = ["Rate", "PairedTable", "PairedSummary", "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
+__all__ = ["LoopStart", "RecordedLoopSettings", "Rate", "PairedTable", "PairedSummary", "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
            "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
            "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS"]
 
 STEPS = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 """The steps of a round, in the order they run (a round that kept no mined scenario has ``skipped`` after
 ``split`` instead of the rest)."""
+
+
+@dataclass(frozen=True, eq=False)
+class LoopStart(JsonRecord):
+    """Where a loop started (``loop.json``'s ``start``): its working ``bank`` and the bank ``scenarios`` it mines and
+    regression-tests, chosen once when the loop began."""
+
+    scenarios: Tuple[str, ...]
+    bank: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"bank": "str", "scenarios": "strings"}
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("scenarios",)
+    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
+    _WHAT: ClassVar[str] = "loop start"
+
+
+@dataclass(frozen=True, eq=False)
+class RecordedLoopSettings(JsonRecord):
+    """``loop.json``'s ``settings``: the starting ``policy``, the loop's settings as recorded
+    (:meth:`~dv2s_gym.mining.loop_settings.LoopSettings.recorded`: the resolved ``bank_dir`` and every other
+    setting, the latter kept in ``extra`` by name), the resolved number of ``workers``, how mined scenarios are held
+    out (``holdout_by``), the env configs of the policy and of fine-tuning, and the starting policy's fingerprint (in
+    ``extra``)."""
+
+    policy: str
+    bank_dir: Optional[str] = None
+    workers: Optional[int] = None
+    holdout_by: Optional[str] = None
+    env_config: Optional[Mapping[str, Any]] = None
+    fine_tune_env_config: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"policy": "str", "bank_dir": "str", "workers": "int", "holdout_by": "str",
+                                        "env_config": "object", "fine_tune_env_config": "object"}
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("policy",)
+    _WHAT: ClassVar[str] = "loop settings"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"bank_dir"})
 
 
 @dataclass(frozen=True, eq=False)
