@@ -358,3 +358,63 @@ def test_a_run_s_origin_is_recorded_as_the_json_object_the_reports_read(tmp_path
     with pytest.raises(MiningError, match="origin must be a RunOrigin"):
         mine("rule", MineSettings(budget=1), out=tmp_path / "run", origin={"command": "dv2s loop"})
     assert not (tmp_path / "run").exists()
+
+
+def test_a_held_out_rate_is_a_rate_record_with_one_formatter():
+    from dv2s_gym.mining.heldout import paired_summary
+    from dv2s_gym.mining.loop_record import PairedSummary, PairedTable, Rate
+    from dv2s_gym.mining.loop_report import rate_text
+    from scenario_bank.records import RecordError
+
+    before = [{"scenario": "s", "seed": seed, "failed": seed < 3, "error": None} for seed in range(4)]
+    after = [{"scenario": "s", "seed": seed, "failed": seed < 1, "error": None} for seed in range(4)]
+    summary = paired_summary(before, after)
+    assert isinstance(summary, PairedSummary) and isinstance(summary.before, Rate)
+    assert isinstance(summary.table, PairedTable) and summary.table.before_only == 2
+    assert (summary.before.k, summary.before.n, summary.after.k) == (3, 4, 1)
+    assert summary.before.text() == rate_text(summary.before) == \
+        f"3/4 = 0.75 [{summary.before.low:.2f}, {summary.before.high:.2f}]"
+    written = summary.to_dict()
+    assert json.loads(json.dumps(written)) == written and written["before"]["rate"] == 0.75
+    assert PairedSummary.from_dict(written).to_dict() == written
+    empty = paired_summary([], [])
+    assert empty.before.text() == rate_text(empty.before) == rate_text(None) == "-"
+    assert empty.to_dict()["before"]["rate"] is None and empty.to_dict()["relative_drop"] is None
+    with pytest.raises(RecordError, match="'before.k'"):
+        PairedSummary.from_dict({**written, "before": {**written["before"], "k": "three"}})
+
+
+def test_the_mining_report_is_a_typed_record_written_as_report_json():
+    from dv2s_gym.mining.report import build_report_from_records, format_summary, markdown
+    from dv2s_gym.mining.report_record import MineCounts, MineReport, SamplerSummary
+    from scenario_bank.records import RecordError
+
+    report = build_report_from_records({"policy": "p", "sampler": "random", "seed": 0}, [], [], {},
+                                       created="2026-01-01T00:00:00+00:00")
+    assert isinstance(report, MineReport) and isinstance(report.counts, MineCounts)
+    assert all(isinstance(entry, SamplerSummary) for entry in report.samplers.values())
+    assert report.counts.failures == report["counts"]["failures"] == 0
+    saved = json.loads(json.dumps(report.to_dict(), sort_keys=True))  # as report.json holds it
+    assert "run_dir" in saved and saved["run_dir"] is None  # every field is written, null included
+    again = MineReport.from_dict(saved)
+    assert json.dumps(again.to_dict(), sort_keys=True) == json.dumps(saved, sort_keys=True)
+    assert markdown(saved) == markdown(report) and format_summary(saved) == format_summary(report)
+    with pytest.raises(RecordError, match="'counts.failures'"):
+        MineReport.from_dict({**saved, "counts": {**saved["counts"], "failures": "none"}})
+
+
+def test_loop_json_s_settings_and_start_are_typed_records():
+    from dv2s_gym.mining.loop_record import LoopStart, RecordedLoopSettings
+    from scenario_bank.records import RecordError
+
+    settings = {"policy": "dv2s-ppo", "bank_dir": None, "workers": 2, "holdout_by": "family",
+                "env_config": {"duration": 10}, "fine_tune_env_config": {}, "budget": 32, "sampler": "random"}
+    record = RecordedLoopSettings.from_dict(settings)
+    assert (record.policy, record.workers, record.bank_dir) == ("dv2s-ppo", 2, None)
+    assert record.to_dict() == settings and record["budget"] == 32  # the other settings kept as recorded
+    start = LoopStart.from_dict({"bank": "/b", "scenarios": ["a", "b"]})
+    assert start.scenarios == ("a", "b") and start.to_dict() == {"bank": "/b", "scenarios": ["a", "b"]}
+    with pytest.raises(RecordError, match="'workers'"):
+        RecordedLoopSettings.from_dict({**settings, "workers": "two"})
+    with pytest.raises(RecordError, match="'scenarios'"):
+        LoopStart.from_dict({"bank": "/b", "scenarios": "a"})

@@ -2,9 +2,10 @@
 
 :func:`build_report` reads a run folder (``settings.json``, ``episodes.jsonl`` as
 :class:`~scenario_bank.records.EpisodeRecord`, ``conversions.jsonl``; record formats in the mining contract), groups
-the failures into clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns a JSON-safe
-dict (in process each failure is a :class:`FailureEntry` and each cluster a :class:`ClusterEntry`, whose
-``to_dict`` is the JSON below); :func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
+the failures into clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns the report as a
+:class:`~dv2s_gym.mining.report_record.MineReport`, whose ``to_dict`` is the JSON below (in process each failure is
+a :class:`FailureEntry` and each cluster a :class:`ClusterEntry` before the report holds their JSON objects);
+:func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
 self-contained ``report.html`` (:mod:`dv2s_gym.mining.html`). Nothing here imports Scenic
 or highway-env, so a report is rebuilt in well under a second from any run folder, also
 from one whose run was killed (a truncated last line of a ``.jsonl`` file is left out).
