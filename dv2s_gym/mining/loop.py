@@ -134,8 +134,9 @@ class LoopReport:
 
     def to_json(self) -> Dict[str, Any]:
         """A JSON-safe dict (the body of ``report.json``)."""
-        body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings.to_dict(),
-                "policy": self.policy, "rounds": [record.to_dict() for record in self.rounds]}
+        body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out),
+                "settings": self.settings.to_dict(), "policy": self.policy,
+                "rounds": [record.to_dict() for record in self.rounds]}
         return {**body, "recommendation": recommendation(body).to_dict()}
 
     @property
@@ -1061,9 +1062,10 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
                        control: Optional[Sequence[Mapping[str, Any]]], *, min_episodes: int,
                        seed: int = 0, families: Optional[Mapping[str, str]] = None,
                        min_families: int = 0, margin: Optional[float] = None) -> HeldOutComparison:
-    """The ``after`` step (a :class:`~dv2s_gym.mining.loop_record.HeldOutComparison`): :func:`~dv2s_gym.mining.heldout.paired_summary` of fine-tuned against start, plus
-    the control's rate and the paired fine-tuned-vs-control table and exact McNemar p (``vs_control``), and
-    each policy's failures by type (``failure_types``: stalls apart from collisions and the rest).
+    """The ``after`` step (a :class:`~dv2s_gym.mining.loop_record.HeldOutComparison`):
+    :func:`~dv2s_gym.mining.heldout.paired_summary` of fine-tuned against start, plus the control's rate and the
+    paired fine-tuned-vs-control table and exact McNemar p (``vs_control``), and each policy's failures by type
+    (``failure_types``: stalls apart from collisions and the rest).
 
     ``families`` maps each held-out scenario to its family (default: each scenario its own); ``heldout_scenarios``
     and ``sampled_families`` count those the episodes came from, ``heldout_families`` the families with at least

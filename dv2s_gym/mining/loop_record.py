@@ -25,7 +25,8 @@ from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 from scenario_bank.records import JsonRecord
 
-__all__ = ["LoopStart", "RecordedLoopSettings", "Rate", "PairedTable", "PairedSummary", "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
+__all__ = ["LoopStart", "RecordedLoopSettings", "Rate", "PairedTable", "PairedSummary",
+           "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
            "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
            "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS"]
 

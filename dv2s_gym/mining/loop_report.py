@@ -101,8 +101,8 @@ import re
 from dv2s_gym.mining.convert import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
 from dv2s_gym.mining.errored import merged_messages, messages_text
 from dv2s_gym.mining.loop_record import (
-    ControlTable, HeldOutComparison, PairedTable, Rate, MinedEntry, MiningSummary, ReferenceGate, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
-    UntouchedComparison)
+    ControlTable, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, Rate, ReferenceGate, RegressSummary,
+    RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
 from dv2s_gym.mining.report_text import by_type_text, clip_caption
 from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, Recommendation, evidence_floor_note,
                                          judge_round, recommendation)

@@ -659,8 +659,9 @@ def _per_scenario(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord]
 def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord],
                               conversions: Sequence[Mapping[str, Any]], clusters: Mapping[int, str], *,
                               created: Optional[str] = None) -> MineReport:
-    """The report (:class:`~dv2s_gym.mining.report_record.MineReport`) from records already read: ``settings`` (the run's ``settings.json``), its episode records,
-    its conversion records, and ``clusters``, which maps each failed episode's index to its cluster id.
+    """The report (:class:`~dv2s_gym.mining.report_record.MineReport`) from records already read: ``settings`` (the
+    run's ``settings.json``), its episode records, its conversion records, and ``clusters``, which maps each failed
+    episode's index to its cluster id.
 
     Raises :class:`MiningReportError` when a failed episode has no cluster id.
     """
@@ -975,13 +976,14 @@ def markdown(report: Union[MineReport, Mapping[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def write_reports(run_dir: PathLike, report: Union[MineReport, Mapping[str, Any], None] = None, *, embed_videos: bool = True
-                  ) -> Dict[str, Path]:
+def write_reports(run_dir: PathLike, report: Union[MineReport, Mapping[str, Any], None] = None, *,
+                  embed_videos: bool = True) -> Dict[str, Path]:
     """Write ``report.json`` (atomic), ``report.md`` and ``report.html`` into the run folder.
 
     Args:
         run_dir: the run folder (``--out`` of ``dv2s mine``).
-        report: a report already built from it (default: :func:`build_report`).
+        report: a report already built from it (a :class:`MineReport` or the JSON object ``report.json`` holds;
+            default: :func:`build_report`).
         embed_videos: embed the failure videos in the HTML page (else it links them relatively).
 
     Returns:
