@@ -66,9 +66,6 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "loop_verdict.recommendation": "takes the body of report.json (and returns its typed Recommendation)",
     "loop_report.final_vs_start": "takes the body of report.json and returns its final_vs_start object",
     "loop_report.with_cross_round_checks": "takes and returns the body of report.json",
-    "loop_report.errored_text": "takes errored episodes per policy (dv2s_gym.mining.errored.errored_episodes' JSON "
-                                "form, kept as loop.json holds it)",
-    "loop_report.errored_note": "takes errored episodes (dv2s_gym.mining.errored.errored_episodes' JSON form)",
     "loop_report.render_markdown": "renders the body of report.json",
     "loop_report.render_html": "renders the body of report.json",
     "loop_report.round_clips": "takes the body of report.json",

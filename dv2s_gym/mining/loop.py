@@ -77,8 +77,9 @@ from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.mining.heldout import episode_failed, failure_types, HeldOutStore, paired_summary
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.loop_record import (
-    FineTuneArm, HeldOutBefore, HeldOutComparison, LoopStart, MinedEntry, MiningSummary, RecordedLoopSettings,
-    ReferenceGate, RegressComparison, RegressSummary, RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
+    ErroredEpisodes, FineTuneArm, HeldOutBefore, HeldOutComparison, LoopStart, MinedEntry, MiningSummary,
+    RecordedLoopSettings, ReferenceGate, RegressComparison, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
+    UntouchedComparison)
 from dv2s_gym.mining.loop_report import (errored_note, errored_text, rate_text, reference_gate_text,
                                          write_loop_reports)
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
@@ -618,7 +619,7 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
     if not steps.done("mine"):
         mined = timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
         _log_mined(loop, number, mined)
-        _log_errored(loop, number, "mining", {"mine": mined.errored or {}})
+        _log_errored(loop, number, "mining", {"mine": mined.errored})
     if not timed.steps.done("split"):
         _split_step(loop, number, current, timed)
     if not timed.steps.split.fine_tune_scenarios and not timed.steps.split.held_out_scenarios:
@@ -722,7 +723,7 @@ def _count_scripts(bank: Path) -> int:
     return sum(1 for _ in Path(bank).glob("*/scenario.scenic"))
 
 
-def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Mapping[str, Any]]) -> None:
+def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Optional[ErroredEpisodes]]) -> None:
     """Say loudly when a step's episodes errored: they count in no rate and no test."""
     text = errored_text(errored)
     if not text:
@@ -735,7 +736,7 @@ def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Map
 def _log_mined(loop: _Loop, number: int, mined: MiningSummary) -> None:
     s = loop.settings
     loop.log(f"round {number}: mined {mined.failures} failures in {mined.episodes} episodes"
-             f"{errored_note(mined.errored or {})}, "
+             f"{errored_note(mined.errored)}, "
              f"{mined.clusters} clusters, "
              f"{len({e.scenario for e in mined.converted})} converted scenarios and "
              f"{len({e.scenario for e in mined.replayed})} exact replays kept"

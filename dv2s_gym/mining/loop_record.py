@@ -25,7 +25,7 @@ from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 from scenario_bank.records import JsonRecord
 
-__all__ = ["LoopStart", "RecordedLoopSettings", "Rate", "PairedTable", "PairedSummary",
+__all__ = ["ErroredEpisodes", "LoopStart", "RecordedLoopSettings", "Rate", "PairedTable", "PairedSummary",
            "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
            "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
            "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS"]
@@ -33,6 +33,25 @@ __all__ = ["LoopStart", "RecordedLoopSettings", "Rate", "PairedTable", "PairedSu
 STEPS = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 """The steps of a round, in the order they run (a round that kept no mined scenario has ``skipped`` after
 ``split`` instead of the rest)."""
+
+
+@dataclass(frozen=True, eq=False)
+class ErroredEpisodes(JsonRecord):
+    """The episodes of a step (or of one policy in it) that ended in an error
+    (:func:`dv2s_gym.mining.errored.errored_episodes`): how many (``episodes``), how many per scenario
+    (``scenarios``), each scenario's distinct kinds of error message with their counts (``messages``: ``{scenario:
+    [{"message", "count"[, "example"]}]}``) and each scenario's first error (``examples``)."""
+
+    episodes: Optional[int] = None
+    scenarios: Optional[Mapping[str, int]] = None
+    messages: Optional[Mapping[str, Any]] = None
+    examples: Optional[Mapping[str, str]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "scenarios": "object", "messages": "object",
+                                        "examples": "object"}
+    _WHAT: ClassVar[str] = "errored episodes"
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,7 +211,7 @@ class MiningSummary(JsonRecord):
 
     episodes: Optional[int] = None
     errors: Optional[int] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[ErroredEpisodes] = None
     failures: Optional[int] = None
     failures_against_policy: Optional[int] = None
     clusters: Optional[int] = None
@@ -213,6 +232,7 @@ class MiningSummary(JsonRecord):
         "clusters": "int", "conversions": "object", "replays": "object", "rejected_reasons": "list",
         "rejected_reason_count": "int", "clusters_not_converted": "int", "clusters_not_kept": "int",
         "clusters_reference_failed": "int", "kept": "list", "folder": "str"}
+    _NESTED: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _ITEMS: ClassVar[Dict[str, type]] = {"kept": MinedEntry}
     _LISTS: ClassVar[Tuple[str, ...]] = ("rejected_reasons",)
     _WHAT: ClassVar[str] = "mining step"
@@ -320,11 +340,12 @@ class HeldOutBefore(JsonRecord):
 
     episodes: Optional[int] = None
     done: Optional[bool] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[ErroredEpisodes] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
     _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "done": "bool", "errored": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _WHAT: ClassVar[str] = "before step"
 
 
@@ -396,7 +417,7 @@ class UntouchedComparison(JsonRecord):
     policies: Optional[Mapping[str, Any]] = None
     fine_tuned_vs_start: Optional[RegressComparison] = None
     control_vs_fine_tuned: Optional[RegressComparison] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[Mapping[str, ErroredEpisodes]] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -405,6 +426,7 @@ class UntouchedComparison(JsonRecord):
                                         "errored": "object"}
     _NESTED: ClassVar[Dict[str, type]] = {"fine_tuned_vs_start": RegressComparison,
                                           "control_vs_fine_tuned": RegressComparison}
+    _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
     _WHAT: ClassVar[str] = "untouched step"
 
@@ -441,7 +463,7 @@ class RegressSummary(JsonRecord):
     regressed: Optional[Tuple[Any, ...]] = None
     report: Optional[str] = None
     held_out_parents: Optional[Mapping[str, Any]] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[Mapping[str, ErroredEpisodes]] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -449,6 +471,7 @@ class RegressSummary(JsonRecord):
         "verdict": "str", "reason": "str", "episodes": "int", "new_failure_rate": "object",
         "old_failure_rate": "object", "difference": "object", "p_value": "number", "regressed": "list",
         "report": "str", "held_out_parents": "object", "errored": "object"}
+    _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _LISTS: ClassVar[Tuple[str, ...]] = ("regressed",)
     _WHAT: ClassVar[str] = "regress step"
 
@@ -549,7 +572,7 @@ class HeldOutComparison(JsonRecord):
     underpowered: Optional[str] = None
     margin: Optional[float] = None
     significantly_worse: Optional[Mapping[str, Any]] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[Mapping[str, ErroredEpisodes]] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -564,6 +587,7 @@ class HeldOutComparison(JsonRecord):
     }
     _NESTED: ClassVar[Dict[str, type]] = {"before": Rate, "after": Rate, "control": Rate, "table": PairedTable,
                                           "failure_types": ArmFailureTypes, "vs_control": VersusControl}
+    _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _LISTS: ClassVar[Tuple[str, ...]] = ("relative_drop_interval",)
     _WHAT: ClassVar[str] = "held-out comparison"
 

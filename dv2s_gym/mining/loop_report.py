@@ -101,7 +101,7 @@ import re
 from dv2s_gym.mining.convert import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
 from dv2s_gym.mining.errored import merged_messages, messages_text
 from dv2s_gym.mining.loop_record import (
-    ControlTable, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, Rate, ReferenceGate, RegressSummary,
+    ControlTable, ErroredEpisodes, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, Rate, ReferenceGate, RegressSummary,
     RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
 from dv2s_gym.mining.report_text import by_type_text, clip_caption
 from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, Recommendation, evidence_floor_note,
@@ -302,25 +302,25 @@ def _recorded(record: Optional[MiningSummary], name: str) -> Any:
     return "-" if value is None and name not in nulls else value
 
 
-def errored_text(errored: Mapping[str, Mapping[str, Any]]) -> str:
+def errored_text(errored: Mapping[str, Optional[ErroredEpisodes]]) -> str:
     """``"fine-tuned policy 3 (urban_pedestrian_crossing 3), control 1 (...)"``: errored episodes per policy (the
     mining step's without a policy's name), in words; empty when none errored."""
     labels = {"start": "starting policy ", "fine_tuned": "fine-tuned policy ", "control": "control ", "mine": ""}
     parts = []
     for role, found in errored.items():
-        if found and found.get("episodes"):
-            names = ", ".join(f"{name} {count}" for name, count in (found.get("scenarios") or {}).items())
-            parts.append(f"{labels.get(role, role + ' ')}{found['episodes']}" + (f" ({names})" if names else ""))
+        if found and found.episodes:
+            names = ", ".join(f"{name} {count}" for name, count in (found.scenarios or {}).items())
+            parts.append(f"{labels.get(role, role + ' ')}{found.episodes}" + (f" ({names})" if names else ""))
     return ", ".join(parts)
 
 
-def errored_note(errored: Mapping[str, Any]) -> str:
+def errored_note(errored: Optional[ErroredEpisodes]) -> str:
     """`` (3 episodes errored: urban_pedestrian_crossing 2, highway_cut_in_from_left 1)`` after an episode count
-    that includes them (:func:`dv2s_gym.mining.errored.errored_episodes`' form); empty when none errored."""
-    count = int((errored or {}).get("episodes") or 0)
+    that includes them (:func:`dv2s_gym.mining.errored.errored_episodes`); empty when none errored."""
+    count = int(errored.episodes or 0) if errored is not None else 0
     if not count:
         return ""
-    names = ", ".join(f"{name} {n}" for name, n in ((errored or {}).get("scenarios") or {}).items())
+    names = ", ".join(f"{name} {n}" for name, n in (errored.scenarios or {}).items())
     return f" ({count} episode{'s' if count != 1 else ''} errored" + (f": {names})" if names else ")")
 
 
@@ -345,7 +345,7 @@ def errored_by_stage(record: RoundRecord) -> List[tuple]:
 
 
 def _errored_total(record: RoundRecord) -> int:
-    return sum(int((found or {}).get("episodes") or 0) for _, by in errored_by_stage(record) for found in by.values())
+    return sum(int(found.episodes or 0) for _, by in errored_by_stage(record) for found in by.values() if found)
 
 
 def _errored_lines(record: RoundRecord) -> List[str]:
@@ -374,7 +374,7 @@ def round_summary(record: RoundRecord) -> str:
     if steps.skipped:
         return f"round {row['round']}: skipped: {steps.skipped}"
     errored = _errored_total(record)
-    mined = errored_note((steps.mine.errored if steps.mine is not None else None) or {})
+    mined = errored_note(steps.mine.errored if steps.mine is not None else None)
     return (f"round {row['round']}: {row['failures']} failures mined in {row['episodes']} episodes{mined}, "
             f"{row['kept']} scenarios kept; held-out failure rate start {row['before']}, control {row['control']}, fine-tuned "
             f"{row['after']}; rest of the bank: {row['verdict']}"
