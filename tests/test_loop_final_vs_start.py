@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dv2s_gym.mining.loop_record import RoundRecord
+from dv2s_gym.mining.loop_record import RecordedLoopSettings, RoundRecord
 from dv2s_gym.mining.loop_report import final_vs_start, write_loop_reports
 from dv2s_gym.regress.report import build_report, write_json
 
@@ -106,7 +106,7 @@ def _state(rounds: list):
         records[record.round - 1] = record
         return record
 
-    return SimpleNamespace(data={"settings": {"policy": "p0"}}, rounds=records, update=update,
+    return SimpleNamespace(settings=RecordedLoopSettings(policy="p0"), rounds=records, update=update,
                            round=lambda number: records[number - 1])
 
 

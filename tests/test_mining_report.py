@@ -692,7 +692,7 @@ def test_each_kept_replay_entry_lists_the_parameters_its_replay_could_not_narrow
     assert clusters[A_COLLISION]["replay_entry"] == "A_replay_1000"
     assert clusters[A_COLLISION]["replay_not_narrowed"] == {"weather": why, "lane": "a <choice>"}
     assert clusters[B_COLLISION]["replay_not_narrowed"] == {} and clusters[B_STALL]["replay_entry"] is None
-    saved = json.loads(json.dumps(report))  # what report.json holds
+    saved = json.loads(json.dumps(report.to_dict()))  # what report.json holds
     assert saved["clusters"][0]["replay_not_narrowed"]["weather"] == why
     text = markdown(report)
     section = text[text.index("### Exact replay entries"):]

@@ -43,21 +43,19 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "report.read_jsonl": "reads the JSON objects of a run's .jsonl files: the file format",
     "report.read_run": "returns the run's conversion records as read; their format is owned by the conversion "
                        "(dv2s_gym.mining.convert), which has no typed record for them yet",
-    "report.build_report": "returns the report's JSON object: the schema of report.json (module docstring)",
-    "report.build_report_from_records": "takes the run's settings.json and conversion records as read and returns "
-                                        "the report's JSON object",
-    "report.headline": "renders the report's JSON object (report.json)",
-    "report.format_summary": "renders the report's JSON object (report.json)",
-    "report.markdown": "renders the report's JSON object (report.json)",
-    "report.write_reports": "writes the report's JSON object (report.json) and its renderings",
+    "report.build_report_from_records": "takes the run's settings.json and conversion records as read",
+    "report.headline": "renders a MineReport or the JSON object report.json holds",
+    "report.format_summary": "renders a MineReport or the JSON object report.json holds",
+    "report.markdown": "renders a MineReport or the JSON object report.json holds",
+    "report.write_reports": "writes a MineReport, or the JSON object report.json holds, and its renderings",
     "rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
     "miner.convert_clusters": "returns the run's conversion records as conversions.jsonl holds them; their format "
                               "is owned by the conversion (dv2s_gym.mining.convert), which has no typed record for "
                               "them yet",
     "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
     "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
-    "loop.heldout_comparison": "takes the held-out store's rows (heldout.jsonl) and returns the after step's JSON "
-                               "object, which the loop reads as a HeldOutComparison",
+    "loop.heldout_comparison": "takes the held-out store's rows (heldout.jsonl; HeldOutEpisode records or their "
+                               "JSON objects)",
     "loop.untouched_settings": "takes the policy's env config, a JSON object of its model card",
     "loop_record.HeldOutComparison.held_out_test": "returns one recorded held-out test (loop_verdict.heldout_worse's "
                                                    "JSON object in the after step's significantly_worse)",
@@ -68,11 +66,6 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "loop_verdict.recommendation": "takes the body of report.json (and returns its typed Recommendation)",
     "loop_report.final_vs_start": "takes the body of report.json and returns its final_vs_start object",
     "loop_report.with_cross_round_checks": "takes and returns the body of report.json",
-    "loop_report.errored_text": "takes errored episodes per policy (dv2s_gym.mining.errored.errored_episodes' JSON "
-                                "form, kept as loop.json holds it)",
-    "loop_report.errored_note": "takes errored episodes (dv2s_gym.mining.errored.errored_episodes' JSON form)",
-    "loop_report.rate_text": "formats a held-out rate object of loop.json ({k, n, rate, low, high}, as "
-                             "dv2s_gym.mining.heldout writes it)",
     "loop_report.render_markdown": "renders the body of report.json",
     "loop_report.render_html": "renders the body of report.json",
     "loop_report.round_clips": "takes the body of report.json",
@@ -362,3 +355,63 @@ def test_a_run_s_origin_is_recorded_as_the_json_object_the_reports_read(tmp_path
     with pytest.raises(MiningError, match="origin must be a RunOrigin"):
         mine("rule", MineSettings(budget=1), out=tmp_path / "run", origin={"command": "dv2s loop"})
     assert not (tmp_path / "run").exists()
+
+
+def test_a_held_out_rate_is_a_rate_record_with_one_formatter():
+    from dv2s_gym.mining.heldout import paired_summary
+    from dv2s_gym.mining.loop_record import PairedSummary, PairedTable, Rate
+    from dv2s_gym.mining.loop_report import rate_text
+    from scenario_bank.records import RecordError
+
+    before = [{"scenario": "s", "seed": seed, "failed": seed < 3, "error": None} for seed in range(4)]
+    after = [{"scenario": "s", "seed": seed, "failed": seed < 1, "error": None} for seed in range(4)]
+    summary = paired_summary(before, after)
+    assert isinstance(summary, PairedSummary) and isinstance(summary.before, Rate)
+    assert isinstance(summary.table, PairedTable) and summary.table.before_only == 2
+    assert (summary.before.k, summary.before.n, summary.after.k) == (3, 4, 1)
+    assert summary.before.text() == rate_text(summary.before) == \
+        f"3/4 = 0.75 [{summary.before.low:.2f}, {summary.before.high:.2f}]"
+    written = summary.to_dict()
+    assert json.loads(json.dumps(written)) == written and written["before"]["rate"] == 0.75
+    assert PairedSummary.from_dict(written).to_dict() == written
+    empty = paired_summary([], [])
+    assert empty.before.text() == rate_text(empty.before) == rate_text(None) == "-"
+    assert empty.to_dict()["before"]["rate"] is None and empty.to_dict()["relative_drop"] is None
+    with pytest.raises(RecordError, match="'before.k'"):
+        PairedSummary.from_dict({**written, "before": {**written["before"], "k": "three"}})
+
+
+def test_the_mining_report_is_a_typed_record_written_as_report_json():
+    from dv2s_gym.mining.report import build_report_from_records, format_summary, markdown
+    from dv2s_gym.mining.report_record import MineCounts, MineReport, SamplerSummary
+    from scenario_bank.records import RecordError
+
+    report = build_report_from_records({"policy": "p", "sampler": "random", "seed": 0}, [], [], {},
+                                       created="2026-01-01T00:00:00+00:00")
+    assert isinstance(report, MineReport) and isinstance(report.counts, MineCounts)
+    assert all(isinstance(entry, SamplerSummary) for entry in report.samplers.values())
+    assert report.counts.failures == report["counts"]["failures"] == 0
+    saved = json.loads(json.dumps(report.to_dict(), sort_keys=True))  # as report.json holds it
+    assert "run_dir" in saved and saved["run_dir"] is None  # every field is written, null included
+    again = MineReport.from_dict(saved)
+    assert json.dumps(again.to_dict(), sort_keys=True) == json.dumps(saved, sort_keys=True)
+    assert markdown(saved) == markdown(report) and format_summary(saved) == format_summary(report)
+    with pytest.raises(RecordError, match="'counts.failures'"):
+        MineReport.from_dict({**saved, "counts": {**saved["counts"], "failures": "none"}})
+
+
+def test_loop_json_s_settings_and_start_are_typed_records():
+    from dv2s_gym.mining.loop_record import LoopStart, RecordedLoopSettings
+    from scenario_bank.records import RecordError
+
+    settings = {"policy": "dv2s-ppo", "bank_dir": None, "workers": 2, "holdout_by": "family",
+                "env_config": {"duration": 10}, "fine_tune_env_config": {}, "budget": 32, "sampler": "random"}
+    record = RecordedLoopSettings.from_dict(settings)
+    assert (record.policy, record.workers, record.bank_dir) == ("dv2s-ppo", 2, None)
+    assert record.to_dict() == settings and record["budget"] == 32  # the other settings kept as recorded
+    start = LoopStart.from_dict({"bank": "/b", "scenarios": ["a", "b"]})
+    assert start.scenarios == ("a", "b") and start.to_dict() == {"bank": "/b", "scenarios": ["a", "b"]}
+    with pytest.raises(RecordError, match="'workers'"):
+        RecordedLoopSettings.from_dict({**settings, "workers": "two"})
+    with pytest.raises(RecordError, match="'scenarios'"):
+        LoopStart.from_dict({"bank": "/b", "scenarios": "a"})

@@ -10,6 +10,8 @@ from __future__ import annotations
 import re
 from typing import Any, Dict, List, Mapping, Optional, Sequence
 
+from dv2s_gym.mining.loop_record import ErroredEpisodes
+
 __all__ = ["ERROR_MESSAGES_KEPT", "error_message", "message_kind", "errored_episodes", "merged_messages",
            "messages_text"]
 
@@ -35,10 +37,11 @@ def message_kind(message: str) -> str:
     return _SEED.sub(SEED_MARK, str(message))
 
 
-def errored_episodes(records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+def errored_episodes(records: Sequence[Mapping[str, Any]]) -> ErroredEpisodes:
     """The episodes of ``records`` that errored (an ``error`` set: a scene that could not be sampled, a crashed or
-    hung worker...), which no rate counts: ``{"episodes": n, "scenarios": {scenario: n}, "messages": {scenario:
-    [{"message", "count"[, "example"]}]}, "examples": {scenario: its first error}}``. ``messages`` holds every
+    hung worker...), which no rate counts, as an :class:`~dv2s_gym.mining.loop_record.ErroredEpisodes` (its JSON
+    object: ``{"episodes": n, "scenarios": {scenario: n}, "messages": {scenario: [{"message", "count"[,
+    "example"]}]}, "examples": {scenario: its first error}}``). ``messages`` holds every
     distinct kind of error of each scenario (:func:`message_kind` of :func:`error_message`: the seed out of it) with
     how many episodes ended in it and, when the kind differs from the message, the first message of that kind as its
     ``example``; the most frequent first (ties in the order they came); :func:`messages_text` lists the
@@ -60,8 +63,8 @@ def errored_episodes(records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
         found[kind] = found.get(kind, 0) + 1
         if kind != message:
             examples.setdefault(name, {}).setdefault(kind, message)
-    return {"episodes": sum(scenarios.values()), "scenarios": dict(sorted(scenarios.items())),
-            "messages": _ranked(counts, examples), "examples": {name: firsts[name] for name in sorted(firsts)}}
+    return ErroredEpisodes(episodes=sum(scenarios.values()), scenarios=dict(sorted(scenarios.items())),
+                           messages=_ranked(counts, examples), examples={name: firsts[name] for name in sorted(firsts)})
 
 
 def _ranked(counts: Mapping[str, Mapping[str, int]],

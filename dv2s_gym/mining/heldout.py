@@ -28,10 +28,11 @@ __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary",
 
 import numpy as np
 from dv2s_gym.mining.jsonl import read_rows
+from dv2s_gym.mining.loop_record import PairedSummary, PairedTable, Rate
 from dv2s_gym.mining.monitors import DEFAULT_MONITOR
 from dv2s_gym.mining.tasks import HELDOUT, heldout_task
 from scenario_bank.records import HeldOutEpisode
-from dv2s_gym.regress.stats import mcnemar_exact, PairedTable, wilson_interval
+from dv2s_gym.regress.stats import mcnemar_exact, PairedTable as Outcomes, wilson_interval
 from dv2s_gym.workers.pool import LocalBackend
 from dv2s_gym.workers.settings import WorkerSettings
 
@@ -109,9 +110,9 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
             for scenario, seed in episodes]
 
 
-def _rate(k: int, n: int) -> Dict[str, Any]:
+def _rate(k: int, n: int) -> Rate:
     low, high = wilson_interval(k, n)
-    return {"k": k, "n": n, "rate": (k / n) if n else None, "low": low, "high": high}
+    return Rate(k=k, n=n, rate=(k / n) if n else None, low=low, high=high)
 
 
 def _relative_drop(before: float, after: float) -> Optional[float]:
@@ -120,7 +121,7 @@ def _relative_drop(before: float, after: float) -> Optional[float]:
 
 def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]], *,
                    bootstrap: int = 2000, seed: int = 0,
-                   families: Optional[Mapping[str, str]] = None) -> Dict[str, Any]:
+                   families: Optional[Mapping[str, str]] = None) -> PairedSummary:
     """Rates before and after (Wilson 95 %), relative drop with a bootstrap interval resampling whole families
     (``families`` maps each scenario to its family; default: each scenario its own), the paired table (candidate =
     after, baseline = before) and the exact two-sided McNemar p.
@@ -141,7 +142,7 @@ def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[
             errors += 1
             continue
         pairs.append((record["scenario"], b, a))
-    table = PairedTable.from_outcomes([a for _, _, a in pairs], [b for _, b, _ in pairs])
+    table = Outcomes.from_outcomes([a for _, _, a in pairs], [b for _, b, _ in pairs])
     n = len(pairs)
     k_before, k_after = sum(b for _, b, _ in pairs), sum(a for _, _, a in pairs)
     drop = _relative_drop(k_before / n, k_after / n) if n else None
@@ -163,23 +164,16 @@ def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[
     for name in scenarios:
         rows = [(b, a) for s, b, a in pairs if s == name]
         per_scenario[name] = {"n": len(rows), "before": sum(b for b, _ in rows), "after": sum(a for _, a in rows)}
-    return {
-        "pairs": n,
-        "errors": errors,
-        "before": _rate(k_before, n),
-        "after": _rate(k_after, n),
-        "relative_drop": drop,
-        "relative_drop_interval": interval,
-        "relative_drop_interval_unit": "family" if families is not None else "scenario",
-        "relative_drop_interval_units": len(units),
-        "mcnemar_unit": "pair",
-        "pairs_per_family": ({unit: sum(1 for s, _, _ in pairs if family_of[s] == unit) for unit in units}
-                             if families is not None else None),
-        "table": {"both_fail": table.both_fail, "after_only": table.candidate_only,
-                  "before_only": table.baseline_only, "neither": table.neither},
-        "mcnemar_p": mcnemar_exact(table) if n else None,
-        "per_scenario": per_scenario,
-    }
+    return PairedSummary(
+        pairs=n, errors=errors, before=_rate(k_before, n), after=_rate(k_after, n), relative_drop=drop,
+        relative_drop_interval=tuple(interval),
+        relative_drop_interval_unit="family" if families is not None else "scenario",
+        relative_drop_interval_units=len(units), mcnemar_unit="pair",
+        pairs_per_family=({unit: sum(1 for s, _, _ in pairs if family_of[s] == unit) for unit in units}
+                          if families is not None else None),
+        table=PairedTable(both_fail=table.both_fail, after_only=table.candidate_only,
+                          before_only=table.baseline_only, neither=table.neither),
+        mcnemar_p=mcnemar_exact(table) if n else None, per_scenario=per_scenario)
 
 
 def failure_types(records: Iterable[Mapping[str, Any]]) -> Dict[str, int]:

@@ -22,6 +22,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
+from dv2s_gym.mining.report_record import MineReport
 from dv2s_gym.mining.report_text import (breadth, by_type_text, clip_caption, parameter_check_text, rate_text,
                                          seed_text)
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
@@ -69,16 +70,17 @@ def _forest(rows: Sequence[Tuple[str, Sequence[Tuple[Mapping[str, Any], str, str
     return svg(height, title, body)
 
 
-def sampler_plot(report: Mapping[str, Any]) -> str:
+def sampler_plot(report: Union[MineReport, Mapping[str, Any]]) -> str:
     """Failures (and avoidable failures) per 100 episodes per sampler, with Wilson 95 % intervals."""
-    samplers = report.get("samplers") or {}
-    highs = [finite((s.get(key) or {}).get("high")) for s in samplers.values()
+    report = MineReport.from_dict(report)
+    samplers = report.samplers
+    highs = [finite((getattr(s, key) or {}).get("high")) for s in samplers.values()
              for key in ("failures_per_100", "avoidable_failures_per_100")]
     widest = max([10.0] + [h * 1.05 for h in highs if h is not None])
     top = min(100.0, 20.0 * math.ceil(widest / 20.0))  # quarter ticks at whole numbers
     rows = []
     for name, s in samplers.items():
-        every, avoidable = s.get("failures_per_100") or {}, s.get("avoidable_failures_per_100") or {}
+        every, avoidable = s.failures_per_100 or {}, s.avoidable_failures_per_100 or {}
         rows.append((str(name), [
             (every, COLOURS["failures"], "circle",
              f"{name}: {every.get('count', 0)} failures in {every.get('n', 0)} episodes, "
@@ -89,10 +91,11 @@ def sampler_plot(report: Mapping[str, Any]) -> str:
                    [("all failures", COLOURS["failures"], "circle"), ("avoidable", COLOURS["avoidable"], "square")], 0)
 
 
-def scenario_plot(report: Mapping[str, Any]) -> str:
+def scenario_plot(report: Union[MineReport, Mapping[str, Any]]) -> str:
     """The failure rate of each scenario with its Wilson 95 % interval."""
+    report = MineReport.from_dict(report)
     rows = []
-    for name, s in (report.get("scenarios") or {}).items():
+    for name, s in report.scenarios.items():
         rate = s.get("failure_rate") or {}
         rows.append((str(name), [(rate, COLOURS["rate"], "circle",
                                   f"{name}: {s.get('failures', 0)} failures ({s.get('avoidable', 0)} avoidable) in "
@@ -101,10 +104,11 @@ def scenario_plot(report: Mapping[str, Any]) -> str:
                    [("failure rate", COLOURS["rate"], "circle")], 2)
 
 
-def discovery_plot(report: Mapping[str, Any]) -> str:
+def discovery_plot(report: Union[MineReport, Mapping[str, Any]]) -> str:
     """Distinct clusters found against episodes run, one step line per sampler."""
-    samplers = report.get("samplers") or {}
-    curves = {name: [(int(p[0]), int(p[1])) for p in (s.get("discovery") or [])] for name, s in samplers.items()}
+    report = MineReport.from_dict(report)
+    samplers = report.samplers
+    curves = {name: [(int(p[0]), int(p[1])) for p in (s.discovery or [])] for name, s in samplers.items()}
     max_x = max([1] + [p[0] for c in curves.values() for p in c])
     max_y = max([1] + [p[1] for c in curves.values() for p in c])
     height, plot_top, plot_bottom, left = 250, 26, 210, 50
@@ -142,20 +146,20 @@ def discovery_plot(report: Mapping[str, Any]) -> str:
 
 
 # --------------------------------------------------------------------------- sections
-def _banner(report: Mapping[str, Any]) -> str:
-    counts = report.get("counts") or {}
-    episodes, avoidable = counts.get("episodes", 0), counts.get("avoidable_clusters", 0)
+def _banner(report: MineReport) -> str:
+    counts = report.counts
+    episodes, avoidable = counts.episodes, counts.avoidable_clusters
     css = "NONE" if not episodes else "FAIL" if avoidable else "PASS"
-    head = (f"{counts.get('failures', 0)} failure(s) in {episodes} episode(s): {counts.get('clusters', 0)} distinct "
+    head = (f"{counts.failures} failure(s) in {episodes} episode(s): {counts.clusters} distinct "
             f"behaviour(s), {avoidable} avoidable")
-    settings = report.get("settings") or {}
+    settings = report.settings
     detail = [f"policy {settings.get('policy')}, sampler {settings.get('sampler')}, {seed_text(settings)}",
-              breadth(counts), f"{counts.get('avoidable', 0)} avoidable, {counts.get('unavoidable', 0)} unavoidable, "
-              f"{counts.get('avoidability_unknown', 0)} unknown failure(s)",
-              f"converted {counts.get('converted', 0)}: kept {counts.get('kept', 0)}, merged {counts.get('merged', 0)}, "
-              f"rejected {counts.get('rejected', 0)}"]
-    if counts.get("errors"):
-        detail.append(f"{counts['errors']} error(s)")
+              breadth(counts), f"{counts.avoidable} avoidable, {counts.unavoidable} unavoidable, "
+              f"{counts.avoidability_unknown} unknown failure(s)",
+              f"converted {counts.converted}: kept {counts.kept}, merged {counts.merged}, "
+              f"rejected {counts.rejected}"]
+    if counts.errors:
+        detail.append(f"{counts.errors} error(s)")
     return f'<div class="banner {css}" id="summary">{escape(head)}<small>{escape("; ".join(detail))}</small></div>'
 
 
@@ -177,19 +181,19 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[Tuple[str, bool]]]) -> s
     return "".join(out) + "</table></div>"
 
 
-def _settings_table(report: Mapping[str, Any]) -> str:
-    settings = report.get("settings") or {}
+def _settings_table(report: MineReport) -> str:
+    settings = report.settings
     keys = [k for k in ("policy", "sampler", "seed", "budget", "scenarios", "bank_dir", "reference", "backend",
                         "workers", "convert") if k in settings]
     rows = [(k, ", ".join(map(str, settings[k])) if isinstance(settings[k], list) else
              seed_text(settings).removeprefix("seed ") if k == "seed" else settings[k]) for k in keys]
-    rows += [("run folder", report.get("run_dir")), ("created", report.get("created")),
-             ("dv2s version", report.get("dv2s_version"))]
+    rows += [("run folder", report.run_dir), ("created", report.created),
+             ("dv2s version", report.dv2s_version)]
     return "<table>" + "".join(f"<tr><th>{escape(k)}</th><td>{escape(v)}</td></tr>" for k, v in rows) + "</table>"
 
 
-def _counts_table(report: Mapping[str, Any]) -> str:
-    c = report.get("counts") or {}
+def _counts_table(report: MineReport) -> str:
+    c = report.counts
     head = ["episodes", "errors", "failures", "distinct behaviours", "(scenario family, failure type) pairs",
             "scenario families with a failure", "avoidable", "unavoidable", "unknown",
             "avoidable behaviours", "converted", "kept", "merged", "rejected"]
@@ -197,39 +201,39 @@ def _counts_table(report: Mapping[str, Any]) -> str:
             "avoidable", "unavoidable", "avoidability_unknown", "avoidable_clusters", "converted", "kept",
             "merged", "rejected"]
     half = len(head) // 2  # two tables of seven columns: one of fourteen is wider than the page
-    table = "".join(_table(head[part], [[(escape(c.get(k, 0)), True) for k in keys[part]]])
+    table = "".join(_table(head[part], [[(escape(getattr(c, k)), True) for k in keys[part]]])
                     for part in (slice(0, half), slice(half, None)))
-    by_type = c.get("failures_by_type") or {}
-    seconds = c.get("conversion_seconds") or {}
+    by_type = c.failures_by_type
+    seconds = c.conversion_seconds
     notes = []
     if by_type:
         notes.append("Failures by type: " + escape(by_type_text(by_type)))
     if seconds.get("n"):
-        stages = c.get("conversion_stage_seconds") or {}
+        stages = c.conversion_stage_seconds
         notes.append(f"Conversion time: median {fmt(seconds.get('median'))} s, max {fmt(seconds.get('max'))} s over "
                      f"{escape(seconds['n'])} conversion(s)" + ("; median per stage: " + ", ".join(
                          f"{escape(stage)} {fmt(value)} s" for stage, value in stages.items()) if stages else ""))
-    if c.get("parameters_compared") or c.get("parameters_not_compared"):
+    if c.parameters_compared or c.parameters_not_compared:
         notes.append(escape(parameter_check_text(c)))
     return table + "".join(f"<p>{n}.</p>" for n in notes)
 
 
-def _sampler_table(report: Mapping[str, Any]) -> str:
+def _sampler_table(report: MineReport) -> str:
     rows = []
-    for name, s in (report.get("samplers") or {}).items():
-        rows.append([(escape(name), False), (escape(s.get("episodes")), True), (escape(s.get("failures")), True),
-                     (escape(fmt_interval(s.get("failures_per_100"), 1)), True),
-                     (escape(fmt_interval(s.get("avoidable_failures_per_100"), 1)), True),
-                     (escape(s.get("clusters")), True), (escape(fmt(s.get("clusters_per_100"), 1)), True),
-                     (escape(s.get("avoidable_clusters")), True),
-                     (escape(s.get("episodes_to_first_failure") or "–"), True)])
+    for name, s in report.samplers.items():
+        rows.append([(escape(name), False), (escape(s.episodes), True), (escape(s.failures), True),
+                     (escape(fmt_interval(s.failures_per_100, 1)), True),
+                     (escape(fmt_interval(s.avoidable_failures_per_100, 1)), True),
+                     (escape(s.clusters), True), (escape(fmt(s.clusters_per_100, 1)), True),
+                     (escape(s.avoidable_clusters), True),
+                     (escape(s.episodes_to_first_failure or "–"), True)])
     return _table(["sampler", "episodes", "failures", "failures per 100 [95%]", "avoidable per 100 [95%]",
                    "clusters", "clusters per 100", "avoidable clusters", "first failure at episode"], rows)
 
 
-def _scenario_table(report: Mapping[str, Any]) -> str:
+def _scenario_table(report: MineReport) -> str:
     rows = []
-    for name, s in (report.get("scenarios") or {}).items():
+    for name, s in report.scenarios.items():
         types = by_type_text(s.get("failures_by_type") or {}) if s.get("failures_by_type") else ""
         rows.append([(_breakable(name), False), (escape(s.get("episodes")), True), (escape(s.get("failures")), True),
                      (escape(fmt_interval(s.get("failure_rate"))), True),
@@ -406,11 +410,11 @@ def _missing_clip_reason(cluster: Mapping[str, Any]) -> str:
     return "none was recorded for this conversion"
 
 
-def _rejected(report: Mapping[str, Any]) -> str:
-    rejected = report.get("rejected") or []
+def _rejected(report: MineReport) -> str:
+    rejected = report.rejected
     if not rejected:
         return '<p class="muted">None.</p>'
-    by_stage = (report.get("counts") or {}).get("rejected_by_stage") or {}
+    by_stage = report.counts.get("rejected_by_stage") or {}
     summary = "<p>By stage: " + ", ".join(f"{escape(s)} {escape(n)}" for s, n in by_stage.items()) + ".</p>"
     rows = [[(f"<code>{_breakable(r.get('cluster'))}</code>", False), (escape(r.get("index")), True),
              (escape(r.get("stage")), False), (escape(r.get("reason")), False)] for r in rejected]
@@ -434,32 +438,33 @@ def _failure_rows(failures: Sequence[Mapping[str, Any]], limit: int = 200) -> st
     return _table(["episode", "scenario", "seed", "failure", "reference driver", "cluster", "trace"], rows) + more
 
 
-def _errors(report: Mapping[str, Any]) -> str:
-    errors = report.get("errors") or []
-    if not errors and not report.get("worker_restarts"):
+def _errors(report: MineReport) -> str:
+    errors = report.errors
+    if not errors and not report.worker_restarts:
         return '<p class="muted">None.</p>'
     items = [f"<li><b>#{escape(e.get('index'))} {escape(e.get('scenario'))} seed {escape(e.get('seed'))}</b>: "
              f"{escape(e.get('error'))}</li>" for e in errors[:100]]
     items += [f"<li><b>#{escape(r.get('index'))} {escape(r.get('scenario'))} seed {escape(r.get('seed'))}</b>: "
               f"{escape('; then '.join(r.get('problems') or []))}; finished by a new worker</li>"
-              for r in (report.get("worker_restarts") or [])[:100]]
+              for r in report.worker_restarts[:100]]
     return "<ul>" + "".join(items) + "</ul>"
 
 
-def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".",
+def render_html(report: Union[MineReport, Mapping[str, Any]], *, base: Union[str, os.PathLike] = ".",
                 page_dir: Optional[Union[str, os.PathLike]] = None, embed_videos: bool = True,
                 max_videos: int = MAX_VIDEOS) -> str:
     """The page as a string; relative video and script paths resolve against ``base`` (the run folder)."""
+    report = MineReport.from_dict(report)
     base = Path(base)
     videos = _Videos(base, Path(page_dir) if page_dir is not None else base, embed_videos, max_videos)
-    title = f"dv2s mine: {(report.get('settings') or {}).get('policy', '?')}"
+    title = f"dv2s mine: {report.settings.get('policy', '?')}"
     plots = [("Failures per 100 episodes for each sampler: every failure (circle) and the avoidable ones (square), "
               "with Wilson 95% intervals", sampler_plot(report)),
              ("Distinct failure clusters found as episodes ran, per sampler", discovery_plot(report)),
              ("Failure rate of each scenario with its Wilson 95% interval", scenario_plot(report))]
     figures = "".join(f"<figure>{plot}<figcaption>{escape(caption)}</figcaption></figure>" for caption, plot in plots)
-    clusters = list(report.get("clusters") or [])
-    unavoidable = list(report.get("unavoidable_clusters") or [])
+    clusters = list(report.clusters)
+    unavoidable = list(report.unavoidable_clusters)
     order = {"kept": 0, "merged": 1, "rejected": 2}
     converted = sorted((c for c in clusters if c.get("conversion")), key=lambda c: order.get(c.get("status"), 3))
     unavoidable_converted = [c for c in unavoidable if c.get("conversion")]
@@ -471,7 +476,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
         f"<h1>{escape(title)}</h1>",
         _banner(report),
         "<h2>Settings</h2>", _settings_table(report),
-        "<h2>Summary</h2>", _counts_table(report), f"<p>{escape(rate_text(report.get('failure_rate')))}</p>",
+        "<h2>Summary</h2>", _counts_table(report), f"<p>{escape(rate_text(report.failure_rate))}</p>",
         "<h2>Samplers</h2>", _sampler_table(report),
         "<h2>Plots</h2>", figures,
         "<h2>Scenarios</h2>", _scenario_table(report),
@@ -482,20 +487,20 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
         '<p class="muted">Each converted cluster\'s failure video (bird\'s-eye, the seconds before and through the '
         "failure) beside the description the pipeline generated from it; below it, where the conversion was kept, "
         "the converted script driven by the same policy on one of its reproduction episodes.</p>",
-        _cards(converted, videos, base, report.get("settings")),
-        f"<h2>Rejected conversions ({len(report.get('rejected') or [])})</h2>", _rejected(report),
-        f"<h2>Unavoidable failures ({len(report.get('unavoidable') or [])})</h2>",
+        _cards(converted, videos, base, report.settings),
+        f"<h2>Rejected conversions ({len(report.rejected)})</h2>", _rejected(report),
+        f"<h2>Unavoidable failures ({len(report.unavoidable)})</h2>",
         '<p class="muted">The reference driver failed in the same scene too; these do not count against the '
         "policy.</p>", _cluster_table(unavoidable),
-        _cards(unavoidable_converted, videos, base, report.get("settings")) if unavoidable_converted else "",
-        _failure_rows(report.get("unavoidable") or []),
+        _cards(unavoidable_converted, videos, base, report.settings) if unavoidable_converted else "",
+        _failure_rows(report.unavoidable),
         "<h2>Errors and worker restarts</h2>", _errors(report),
         f"<script>{SELFTEST}</script></body></html>",
     ]
     return "\n".join(parts)
 
 
-def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
+def write_html(report: Union[MineReport, Mapping[str, Any]], path: Union[str, os.PathLike], *,
                base: Optional[Union[str, os.PathLike]] = None, embed_videos: bool = True,
                max_videos: int = MAX_VIDEOS) -> Path:
     """Write the page to ``path`` (atomically) and return ``path``.
@@ -508,8 +513,9 @@ def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
         embed_videos: embed up to ``max_videos`` failure videos as data URIs; the others are
             linked relative to the page.
     """
+    report = MineReport.from_dict(report)
     path = Path(path)
-    base = Path(base) if base is not None else Path(report.get("run_dir") or path.parent)
+    base = Path(base) if base is not None else Path(report.run_dir or path.parent)
     page = render_html(report, base=base, page_dir=path.parent, embed_videos=embed_videos, max_videos=max_videos)
     path.parent.mkdir(parents=True, exist_ok=True)
     return atomic_write_text(path, page)

@@ -77,8 +77,9 @@ from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.mining.heldout import episode_failed, failure_types, HeldOutStore, paired_summary
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.loop_record import (
-    FineTuneArm, HeldOutBefore, HeldOutComparison, MinedEntry, MiningSummary, ReferenceGate, RegressComparison,
-    RegressSummary, RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
+    ErroredEpisodes, FineTuneArm, HeldOutBefore, HeldOutComparison, LoopStart, MinedEntry, MiningSummary,
+    RecordedLoopSettings, ReferenceGate, RegressComparison, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
+    UntouchedComparison)
 from dv2s_gym.mining.loop_report import (errored_note, errored_text, rate_text, reference_gate_text,
                                          write_loop_reports)
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
@@ -131,12 +132,14 @@ class LoopReport:
     """The spec of the last round's fine-tuned policy (the starting policy if no round fine-tuned); the policy to
     use is :attr:`recommendation`'s."""
     paths: Dict[str, Path]
-    settings: Dict[str, Any]
+    settings: RecordedLoopSettings
+    """The loop's settings as ``loop.json`` records them."""
 
     def to_json(self) -> Dict[str, Any]:
         """A JSON-safe dict (the body of ``report.json``)."""
-        body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings,
-                "policy": self.policy, "rounds": [record.to_dict() for record in self.rounds]}
+        body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out),
+                "settings": self.settings.to_dict(), "policy": self.policy,
+                "rounds": [record.to_dict() for record in self.rounds]}
         return {**body, "recommendation": recommendation(body).to_dict()}
 
     @property
@@ -153,8 +156,10 @@ class LoopReport:
 
 # --------------------------------------------------------------------------- state
 class _State:
-    """``loop.json``: settings, the starting bank's scenarios and every round (:attr:`rounds`, each a
-    :class:`~dv2s_gym.mining.loop_record.RoundRecord` replaced as its steps finish; atomic writes)."""
+    """``loop.json``: its settings (:attr:`settings`, a :class:`~dv2s_gym.mining.loop_record.RecordedLoopSettings`),
+    the starting bank and scenarios (:attr:`start`, a :class:`~dv2s_gym.mining.loop_record.LoopStart` once chosen)
+    and every round (:attr:`rounds`, each a :class:`~dv2s_gym.mining.loop_record.RoundRecord` replaced as its steps
+    finish); atomic writes."""
 
     def __init__(self, path: Path, settings: Dict[str, Any]) -> None:
         self.path = path
@@ -172,15 +177,19 @@ class _State:
             # the same spec naming a checkpoint replaced in place is refused, naming what changed
             check_policy_unchanged(recorded, settings["policy"], folder=path.parent, run="loop", error=LoopError)
             data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY})  # what may change
-            self.data = data
         else:
-            self.data = {**record_format(STATE_SCHEMA, STATE_VERSION), "settings": settings, "start": None,
-                         "rounds": []}
-        self.rounds: List[RoundRecord] = _read_rounds(self.data.pop("rounds"), path)
+            data = {**record_format(STATE_SCHEMA, STATE_VERSION), "settings": settings, "start": None, "rounds": []}
+        self.rounds: List[RoundRecord] = _read_rounds(data.pop("rounds"), path)
+        self.settings: RecordedLoopSettings = _read_part(RecordedLoopSettings, data.pop("settings"), path)
+        start = data.pop("start", None)
+        self.start: Optional[LoopStart] = None if start is None else _read_part(LoopStart, start, path)
+        self.extra = data  # the record's format and any top-level keys, written back as read
 
     def save(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_json(self.path, {**self.data, "rounds": [record.to_dict() for record in self.rounds]}, indent=1)
+        atomic_write_json(self.path, {**self.extra, "settings": self.settings.to_dict(),
+                                      "start": None if self.start is None else self.start.to_dict(),
+                                      "rounds": [record.to_dict() for record in self.rounds]}, indent=1)
 
     def round(self, number: int) -> RoundRecord:
         """Round ``number``'s record (the rounds before it started when not yet)."""
@@ -208,6 +217,16 @@ def _read_rounds(rounds: List[Any], path: Path) -> List[RoundRecord]:
             raise LoopError(f"{path} is not a dv2s loop record (round {number}: {error}); choose another --out, or "
                             "delete the file to start the loop over") from None
     return records
+
+
+def _read_part(kind: type, data: Mapping[str, Any], path: Path) -> Any:
+    """``loop.json``'s ``settings`` or ``start`` (structure checked by :func:`_check_structure`) as its record; a
+    field of the wrong kind is refused in one line naming the field and the fix."""
+    try:
+        return kind.from_dict(data)
+    except RecordError as error:
+        raise LoopError(f"{path} is not a dv2s loop record ({error}); choose another --out, or delete the file to "
+                        "start the loop over") from None
 
 
 def _check_structure(data: Any, path: Path) -> None:
@@ -502,15 +521,15 @@ def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, l
     except TrainingError as error:
         raise LoopError(f"--fine-tune-reward: {error}") from None
     state = _State(out / "loop.json", _recorded_settings(policy, settings, workers, env_config, fine_tune_config))
-    bank = _working_bank(out, state.data["settings"]["bank_dir"])
-    if state.data.get("start") is None:
+    bank = _working_bank(out, state.settings.bank_dir)
+    if state.start is None:
         names = sorted(select_scenarios(list(settings.scenarios) if settings.scenarios is not None else None, bank,
                                            command="dv2s loop"))
         if not names:
             raise LoopError("the scenario selection is empty; name bank scenarios or tag:<tag>")
-        state.data["start"] = {"bank": bank, "scenarios": names}
+        state.start = LoopStart(bank=bank, scenarios=tuple(names))
         state.save()
-    return _Loop(settings=settings, state=state, out=out, bank=bank, start_names=state.data["start"]["scenarios"],
+    return _Loop(settings=settings, state=state, out=out, bank=bank, start_names=list(state.start.scenarios),
                  env_config=env_config, fine_tune_config=fine_tune_config, workers=workers, progress=progress, log=log)
 
 
@@ -572,7 +591,7 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
     if not steps.done("mine"):
         mined = timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
         _log_mined(loop, number, mined)
-        _log_errored(loop, number, "mining", {"mine": mined.errored or {}})
+        _log_errored(loop, number, "mining", {"mine": mined.errored})
     if not timed.steps.done("split"):
         _split_step(loop, number, current, timed)
     if not timed.steps.split.fine_tune_scenarios and not timed.steps.split.held_out_scenarios:
@@ -616,7 +635,7 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
     recorded in round ``number``'s ``next_policy`` and ``next_policy_reason``."""
     rounds = loop.state.rounds[:number]
     record = rounds[-1]
-    start = loop.state.data["settings"]["policy"]
+    start = loop.state.settings.policy
     # as the report judges it: the cross-round check on each accepted round's policy
     body = loop_report.with_cross_round_checks({"settings": {"policy": start},
                                                 "rounds": [r.to_dict() for r in rounds]}, folder=loop.out)
@@ -637,7 +656,7 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
 def _earlier_round_spec(spec: Any, loop: _Loop, number: int) -> str:
     """``spec`` read back from ``loop.json`` as the starting policy or the fine-tuned checkpoint of a round
     before ``number`` (anything else is refused, as :func:`_round_spec` does)."""
-    if spec == loop.state.data["settings"]["policy"]:
+    if spec == loop.state.settings.policy:
         return spec
     for earlier in range(number - 1, 0, -1):
         try:
@@ -676,7 +695,7 @@ def _count_scripts(bank: Path) -> int:
     return sum(1 for _ in Path(bank).glob("*/scenario.scenic"))
 
 
-def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Mapping[str, Any]]) -> None:
+def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Optional[ErroredEpisodes]]) -> None:
     """Say loudly when a step's episodes errored: they count in no rate and no test."""
     text = errored_text(errored)
     if not text:
@@ -689,7 +708,7 @@ def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Map
 def _log_mined(loop: _Loop, number: int, mined: MiningSummary) -> None:
     s = loop.settings
     loop.log(f"round {number}: mined {mined.failures} failures in {mined.episodes} episodes"
-             f"{errored_note(mined.errored or {})}, "
+             f"{errored_note(mined.errored)}, "
              f"{mined.clusters} clusters, "
              f"{len({e.scenario for e in mined.converted})} converted scenarios and "
              f"{len({e.scenario for e in mined.replayed})} exact replays kept"
@@ -881,9 +900,9 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
     s = loop.settings
     summary = heldout_comparison(before, after, control_records, min_episodes=s.min_heldout_episodes, seed=s.seed,
                                  families=families, min_families=s.min_heldout_families, margin=s.margin)
-    summary["errored"] = {"fine_tuned": errored_episodes(after),
-                          **({"control": errored_episodes(control_records)} if control_records is not None else {})}
-    return HeldOutComparison.from_dict(summary)
+    return summary.replace(errored={
+        "fine_tuned": errored_episodes(after),
+        **({"control": errored_episodes(control_records)} if control_records is not None else {})})
 
 
 def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
@@ -1015,10 +1034,11 @@ def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, l
 def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]],
                        control: Optional[Sequence[Mapping[str, Any]]], *, min_episodes: int,
                        seed: int = 0, families: Optional[Mapping[str, str]] = None,
-                       min_families: int = 0, margin: Optional[float] = None) -> Dict[str, Any]:
-    """The ``after`` step: :func:`~dv2s_gym.mining.heldout.paired_summary` of fine-tuned against start, plus
-    the control's rate and the paired fine-tuned-vs-control table and exact McNemar p (``vs_control``), and
-    each policy's failures by type (``failure_types``: stalls apart from collisions and the rest).
+                       min_families: int = 0, margin: Optional[float] = None) -> HeldOutComparison:
+    """The ``after`` step (a :class:`~dv2s_gym.mining.loop_record.HeldOutComparison`):
+    :func:`~dv2s_gym.mining.heldout.paired_summary` of fine-tuned against start, plus the control's rate and the
+    paired fine-tuned-vs-control table and exact McNemar p (``vs_control``), and each policy's failures by type
+    (``failure_types``: stalls apart from collisions and the rest).
 
     ``families`` maps each held-out scenario to its family (default: each scenario its own); ``heldout_scenarios``
     and ``sampled_families`` count those the episodes came from, ``heldout_families`` the families with at least
@@ -1033,7 +1053,7 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     # the drop's interval resamples families, the unit the split holds out (scenarios of one family are not
     # independent); a scenario without a family stands for itself
     summary = paired_summary(before, after, seed=seed,
-                             families={name: (families or {}).get(name, name) for name in scenarios})
+                             families={name: (families or {}).get(name, name) for name in scenarios}).to_dict()
     summary["min_episodes"] = min_episodes
     summary["heldout_scenarios"] = len(scenarios)
     # a family counts only with a tested pair (no error on either side) in each held-out test: one whose episodes
@@ -1050,16 +1070,14 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     summary["failure_types"] = {"start": failure_types(before), "fine_tuned": failure_types(after)}
     if control is not None:
         versus = paired_summary(control, after, seed=seed, bootstrap=0)
-        table = versus["table"]
-        summary["control"] = versus["before"]
+        summary["control"] = versus.before.to_dict()
         summary["failure_types"]["control"] = failure_types(control)
-        summary["vs_control"] = {"pairs": versus["pairs"], "errors": versus["errors"],
-                                 "relative_drop": versus["relative_drop"],
-                                 "table": {"both_fail": table["both_fail"], "fine_tuned_only": table["after_only"],
-                                           "control_only": table["before_only"], "neither": table["neither"]},
-                                 "mcnemar_p": versus["mcnemar_p"],
-                                 "per_scenario": {name: row["before"]
-                                                  for name, row in versus["per_scenario"].items()}}
+        summary["vs_control"] = {"pairs": versus.pairs, "errors": versus.errors, "relative_drop": versus.relative_drop,
+                                 "table": {"both_fail": versus.table.both_fail,
+                                           "fine_tuned_only": versus.table.after_only,
+                                           "control_only": versus.table.before_only, "neither": versus.table.neither},
+                                 "mcnemar_p": versus.mcnemar_p,
+                                 "per_scenario": {name: row["before"] for name, row in versus.per_scenario.items()}}
     shortfall = underpowered(summary["pairs"], min_episodes, summary["heldout_families"], min_families, tested=True)
     if shortfall:
         summary["underpowered"] = shortfall
@@ -1081,7 +1099,7 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
         "start": None if shortfall else heldout_worse(_family_tables(before, after, families), "start", margin),
         "control": None if shortfall or control_shortfall or control is None else heldout_worse(
             _family_tables(control, after, families), "control", margin)}
-    return summary
+    return HeldOutComparison.from_dict(summary)
 
 
 def _control_shortfall(pairs: int, families: set, min_episodes: int, min_families: int) -> Optional[str]:
@@ -1237,7 +1255,7 @@ def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> No
 
 def _write(out: Path, state: _State) -> LoopReport:
     tuned = [r.new_policy for r in state.rounds if r.new_policy]
-    last = tuned[-1] if tuned else state.data["settings"]["policy"]
-    report = LoopReport(out=out, rounds=list(state.rounds), policy=last, paths={}, settings=state.data["settings"])
+    last = tuned[-1] if tuned else state.settings.policy
+    report = LoopReport(out=out, rounds=list(state.rounds), policy=last, paths={}, settings=state.settings)
     report.paths = write_loop_reports(report.to_json(), out)
     return report

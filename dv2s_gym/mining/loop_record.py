@@ -25,13 +25,154 @@ from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 from scenario_bank.records import JsonRecord
 
-__all__ = ["RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
+__all__ = ["ErroredEpisodes", "LoopStart", "RecordedLoopSettings", "Rate", "PairedTable", "PairedSummary",
+           "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
            "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
            "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS"]
 
 STEPS = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 """The steps of a round, in the order they run (a round that kept no mined scenario has ``skipped`` after
 ``split`` instead of the rest)."""
+
+
+@dataclass(frozen=True, eq=False)
+class ErroredEpisodes(JsonRecord):
+    """The episodes of a step (or of one policy in it) that ended in an error
+    (:func:`dv2s_gym.mining.errored.errored_episodes`): how many (``episodes``), how many per scenario
+    (``scenarios``), each scenario's distinct kinds of error message with their counts (``messages``: ``{scenario:
+    [{"message", "count"[, "example"]}]}``) and each scenario's first error (``examples``)."""
+
+    episodes: Optional[int] = None
+    scenarios: Optional[Mapping[str, int]] = None
+    messages: Optional[Mapping[str, Any]] = None
+    examples: Optional[Mapping[str, str]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "scenarios": "object", "messages": "object",
+                                        "examples": "object"}
+    _WHAT: ClassVar[str] = "errored episodes"
+
+
+@dataclass(frozen=True, eq=False)
+class LoopStart(JsonRecord):
+    """Where a loop started (``loop.json``'s ``start``): its working ``bank`` and the bank ``scenarios`` it mines and
+    regression-tests, chosen once when the loop began."""
+
+    scenarios: Tuple[str, ...]
+    bank: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"bank": "str", "scenarios": "strings"}
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("scenarios",)
+    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
+    _WHAT: ClassVar[str] = "loop start"
+
+
+@dataclass(frozen=True, eq=False)
+class RecordedLoopSettings(JsonRecord):
+    """``loop.json``'s ``settings``: the starting ``policy``, the loop's settings as recorded
+    (:meth:`~dv2s_gym.mining.loop_settings.LoopSettings.recorded`: the resolved ``bank_dir`` and every other
+    setting, the latter kept in ``extra`` by name), the resolved number of ``workers``, how mined scenarios are held
+    out (``holdout_by``), the env configs of the policy and of fine-tuning, and the starting policy's fingerprint (in
+    ``extra``)."""
+
+    policy: str
+    bank_dir: Optional[str] = None
+    workers: Optional[int] = None
+    holdout_by: Optional[str] = None
+    env_config: Optional[Mapping[str, Any]] = None
+    fine_tune_env_config: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"policy": "str", "bank_dir": "str", "workers": "int", "holdout_by": "str",
+                                        "env_config": "object", "fine_tune_env_config": "object"}
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("policy",)
+    _WHAT: ClassVar[str] = "loop settings"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"bank_dir"})
+
+
+@dataclass(frozen=True, eq=False)
+class Rate(JsonRecord):
+    """A held-out failure rate: ``k`` failed episodes of ``n``, the ``rate`` (``None`` without an episode) and its
+    95 % Wilson interval ``low``..``high`` (:func:`dv2s_gym.mining.heldout.paired_summary`)."""
+
+    k: Optional[int] = None
+    n: Optional[int] = None
+    rate: Optional[float] = None
+    low: Optional[float] = None
+    high: Optional[float] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"k": "int", "n": "int", "rate": "number", "low": "number", "high": "number"}
+    _WHAT: ClassVar[str] = "rate"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+    def text(self) -> str:
+        """The rate as ``k/n = rate [low, high]`` (``-`` without an episode)."""
+        if self.rate is None:
+            return "-"
+        return f"{self.k}/{self.n} = {self.rate:.2f} [{self.low:.2f}, {self.high:.2f}]"
+
+
+@dataclass(frozen=True, eq=False)
+class PairedTable(JsonRecord):
+    """The paired held-out table of the fine-tuned policy (``after``) against the starting one (``before``): pairs
+    where both failed, only the fine-tuned one, only the start, neither."""
+
+    both_fail: Optional[int] = None
+    after_only: Optional[int] = None
+    before_only: Optional[int] = None
+    neither: Optional[int] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"both_fail": "int", "after_only": "int", "before_only": "int",
+                                        "neither": "int"}
+    _WHAT: ClassVar[str] = "paired table"
+
+
+@dataclass(frozen=True, eq=False)
+class PairedSummary(JsonRecord):
+    """Two policies' held-out episodes compared pair by pair (:func:`dv2s_gym.mining.heldout.paired_summary`):
+    ``pairs`` tested and ``errors`` left out, the rates ``before`` and ``after``, the ``relative_drop`` with its
+    bootstrap interval and what it resampled, the paired ``table`` and exact McNemar p, and each scenario's
+    counts (``per_scenario``: ``{scenario: {"n", "before", "after"}}``)."""
+
+    pairs: int = 0
+    errors: int = 0
+    before: Rate = field(default_factory=Rate)
+    after: Rate = field(default_factory=Rate)
+    relative_drop: Optional[float] = None
+    relative_drop_interval: Tuple[Any, ...] = (None, None)
+    relative_drop_interval_unit: Optional[str] = None
+    relative_drop_interval_units: Optional[int] = None
+    mcnemar_unit: Optional[str] = None
+    pairs_per_family: Optional[Mapping[str, int]] = None
+    table: PairedTable = field(default_factory=PairedTable)
+    mcnemar_p: Optional[float] = None
+    per_scenario: Mapping[str, Any] = field(default_factory=dict)
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "pairs": "int", "errors": "int", "before": "object", "after": "object", "relative_drop": "number",
+        "relative_drop_interval": "list", "relative_drop_interval_unit": "str", "relative_drop_interval_units": "int",
+        "mcnemar_unit": "str", "pairs_per_family": "object", "table": "object", "mcnemar_p": "number",
+        "per_scenario": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {"before": Rate, "after": Rate, "table": PairedTable}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("relative_drop_interval",)
+    _WHAT: ClassVar[str] = "paired summary"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"relative_drop", "mcnemar_p", "pairs_per_family"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,7 +211,7 @@ class MiningSummary(JsonRecord):
 
     episodes: Optional[int] = None
     errors: Optional[int] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[ErroredEpisodes] = None
     failures: Optional[int] = None
     failures_against_policy: Optional[int] = None
     clusters: Optional[int] = None
@@ -91,6 +232,7 @@ class MiningSummary(JsonRecord):
         "clusters": "int", "conversions": "object", "replays": "object", "rejected_reasons": "list",
         "rejected_reason_count": "int", "clusters_not_converted": "int", "clusters_not_kept": "int",
         "clusters_reference_failed": "int", "kept": "list", "folder": "str"}
+    _NESTED: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _ITEMS: ClassVar[Dict[str, type]] = {"kept": MinedEntry}
     _LISTS: ClassVar[Tuple[str, ...]] = ("rejected_reasons",)
     _WHAT: ClassVar[str] = "mining step"
@@ -198,11 +340,12 @@ class HeldOutBefore(JsonRecord):
 
     episodes: Optional[int] = None
     done: Optional[bool] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[ErroredEpisodes] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
     _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "done": "bool", "errored": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _WHAT: ClassVar[str] = "before step"
 
 
@@ -274,7 +417,7 @@ class UntouchedComparison(JsonRecord):
     policies: Optional[Mapping[str, Any]] = None
     fine_tuned_vs_start: Optional[RegressComparison] = None
     control_vs_fine_tuned: Optional[RegressComparison] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[Mapping[str, ErroredEpisodes]] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -283,6 +426,7 @@ class UntouchedComparison(JsonRecord):
                                         "errored": "object"}
     _NESTED: ClassVar[Dict[str, type]] = {"fine_tuned_vs_start": RegressComparison,
                                           "control_vs_fine_tuned": RegressComparison}
+    _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
     _WHAT: ClassVar[str] = "untouched step"
 
@@ -319,7 +463,7 @@ class RegressSummary(JsonRecord):
     regressed: Optional[Tuple[Any, ...]] = None
     report: Optional[str] = None
     held_out_parents: Optional[Mapping[str, Any]] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[Mapping[str, ErroredEpisodes]] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -327,6 +471,7 @@ class RegressSummary(JsonRecord):
         "verdict": "str", "reason": "str", "episodes": "int", "new_failure_rate": "object",
         "old_failure_rate": "object", "difference": "object", "p_value": "number", "regressed": "list",
         "report": "str", "held_out_parents": "object", "errored": "object"}
+    _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _LISTS: ClassVar[Tuple[str, ...]] = ("regressed",)
     _WHAT: ClassVar[str] = "regress step"
 
@@ -405,15 +550,15 @@ class HeldOutComparison(JsonRecord):
 
     pairs: Optional[int] = None
     errors: Optional[int] = None
-    before: Optional[Mapping[str, Any]] = None
-    after: Optional[Mapping[str, Any]] = None
+    before: Optional[Rate] = None
+    after: Optional[Rate] = None
     relative_drop: Optional[float] = None
     relative_drop_interval: Optional[Tuple[Any, ...]] = None
     relative_drop_interval_unit: Optional[str] = None
     relative_drop_interval_units: Optional[int] = None
     mcnemar_unit: Optional[str] = None
     pairs_per_family: Optional[Mapping[str, int]] = None
-    table: Optional[Mapping[str, int]] = None
+    table: Optional[PairedTable] = None
     mcnemar_p: Optional[float] = None
     per_scenario: Optional[Mapping[str, Any]] = None
     min_episodes: Optional[int] = None
@@ -422,12 +567,12 @@ class HeldOutComparison(JsonRecord):
     sampled_families: Optional[int] = None
     min_families: Optional[int] = None
     failure_types: Optional[ArmFailureTypes] = None
-    control: Optional[Mapping[str, Any]] = None
+    control: Optional[Rate] = None
     vs_control: Optional[VersusControl] = None
     underpowered: Optional[str] = None
     margin: Optional[float] = None
     significantly_worse: Optional[Mapping[str, Any]] = None
-    errored: Optional[Mapping[str, Any]] = None
+    errored: Optional[Mapping[str, ErroredEpisodes]] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -440,7 +585,9 @@ class HeldOutComparison(JsonRecord):
         "vs_control": "object", "underpowered": "str", "margin": "number", "significantly_worse": "object",
         "errored": "object",
     }
-    _NESTED: ClassVar[Dict[str, type]] = {"failure_types": ArmFailureTypes, "vs_control": VersusControl}
+    _NESTED: ClassVar[Dict[str, type]] = {"before": Rate, "after": Rate, "control": Rate, "table": PairedTable,
+                                          "failure_types": ArmFailureTypes, "vs_control": VersusControl}
+    _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _LISTS: ClassVar[Tuple[str, ...]] = ("relative_drop_interval",)
     _WHAT: ClassVar[str] = "held-out comparison"
 

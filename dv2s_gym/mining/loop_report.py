@@ -101,8 +101,8 @@ import re
 from dv2s_gym.mining.conversion_files import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
 from dv2s_gym.mining.errored import merged_messages, messages_text
 from dv2s_gym.mining.loop_record import (
-    HeldOutComparison, MinedEntry, MiningSummary, ReferenceGate, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
-    UntouchedComparison)
+    ControlTable, ErroredEpisodes, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, Rate, ReferenceGate, RegressSummary,
+    RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
 from dv2s_gym.mining.report_text import by_type_text, clip_caption
 from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, Recommendation, evidence_floor_note,
                                          judge_round, recommendation)
@@ -121,11 +121,9 @@ FINAL_VS_START_DIR = "final_vs_start"
 """Folder (in the loop folder) of the final-vs-starting-policy paired regression report."""
 
 
-def rate_text(r: Optional[Mapping[str, Any]]) -> str:
-    """A held-out failure rate ``{"k", "n", "rate", "low", "high"}`` as ``k/n = rate [low, high]`` (``-``: none)."""
-    if not r or r.get("rate") is None:
-        return "-"
-    return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['low']:.2f}, {r['high']:.2f}]"
+def rate_text(rate: Optional[Rate]) -> str:
+    """A held-out failure rate as ``k/n = rate [low, high]`` (:meth:`Rate.text`; ``-``: none)."""
+    return "-" if rate is None else rate.text()
 
 
 def _summary_rate(r: Optional[Mapping[str, Any]]) -> str:
@@ -304,25 +302,25 @@ def _recorded(record: Optional[MiningSummary], name: str) -> Any:
     return "-" if value is None and name not in nulls else value
 
 
-def errored_text(errored: Mapping[str, Mapping[str, Any]]) -> str:
+def errored_text(errored: Mapping[str, Optional[ErroredEpisodes]]) -> str:
     """``"fine-tuned policy 3 (urban_pedestrian_crossing 3), control 1 (...)"``: errored episodes per policy (the
     mining step's without a policy's name), in words; empty when none errored."""
     labels = {"start": "starting policy ", "fine_tuned": "fine-tuned policy ", "control": "control ", "mine": ""}
     parts = []
     for role, found in errored.items():
-        if found and found.get("episodes"):
-            names = ", ".join(f"{name} {count}" for name, count in (found.get("scenarios") or {}).items())
-            parts.append(f"{labels.get(role, role + ' ')}{found['episodes']}" + (f" ({names})" if names else ""))
+        if found and found.episodes:
+            names = ", ".join(f"{name} {count}" for name, count in (found.scenarios or {}).items())
+            parts.append(f"{labels.get(role, role + ' ')}{found.episodes}" + (f" ({names})" if names else ""))
     return ", ".join(parts)
 
 
-def errored_note(errored: Mapping[str, Any]) -> str:
+def errored_note(errored: Optional[ErroredEpisodes]) -> str:
     """`` (3 episodes errored: urban_pedestrian_crossing 2, highway_cut_in_from_left 1)`` after an episode count
-    that includes them (:func:`dv2s_gym.mining.errored.errored_episodes`' form); empty when none errored."""
-    count = int((errored or {}).get("episodes") or 0)
+    that includes them (:func:`dv2s_gym.mining.errored.errored_episodes`); empty when none errored."""
+    count = int(errored.episodes or 0) if errored is not None else 0
     if not count:
         return ""
-    names = ", ".join(f"{name} {n}" for name, n in ((errored or {}).get("scenarios") or {}).items())
+    names = ", ".join(f"{name} {n}" for name, n in (errored.scenarios or {}).items())
     return f" ({count} episode{'s' if count != 1 else ''} errored" + (f": {names})" if names else ")")
 
 
@@ -347,7 +345,7 @@ def errored_by_stage(record: RoundRecord) -> List[tuple]:
 
 
 def _errored_total(record: RoundRecord) -> int:
-    return sum(int((found or {}).get("episodes") or 0) for _, by in errored_by_stage(record) for found in by.values())
+    return sum(int(found.episodes or 0) for _, by in errored_by_stage(record) for found in by.values() if found)
 
 
 def _errored_lines(record: RoundRecord) -> List[str]:
@@ -376,7 +374,7 @@ def round_summary(record: RoundRecord) -> str:
     if steps.skipped:
         return f"round {row['round']}: skipped: {steps.skipped}"
     errored = _errored_total(record)
-    mined = errored_note((steps.mine.errored if steps.mine is not None else None) or {})
+    mined = errored_note(steps.mine.errored if steps.mine is not None else None)
     return (f"round {row['round']}: {row['failures']} failures mined in {row['episodes']} episodes{mined}, "
             f"{row['kept']} scenarios kept; held-out failure rate start {row['before']}, control {row['control']}, fine-tuned "
             f"{row['after']}; rest of the bank: {row['verdict']}"
@@ -434,12 +432,12 @@ def _untouched_lines(untouched: Optional[UntouchedComparison]) -> List[str]:
     return lines
 
 
-def _sources_text(after: Mapping[str, Any]) -> str:
+def _sources_text(after: HeldOutComparison) -> str:
     """`` from F families (S scenarios)`` of a held-out comparison, or nothing for one recorded without them."""
-    if after.get("heldout_families") is None:
+    if after.heldout_families is None:
         return ""
-    families, scenarios = after["heldout_families"], after.get("heldout_scenarios")
-    sampled = after.get("sampled_families")
+    families, scenarios = after.heldout_families, after.heldout_scenarios
+    sampled = after.sampled_families
     untested = (f", {sampled - families} more with no tested pair" if sampled is not None and sampled > families
                 else "")
     return (f" from {families} famil{'y' if families == 1 else 'ies'} ({scenarios} scenario"
@@ -474,45 +472,45 @@ def _reference_lines(gate: Optional[ReferenceGate]) -> List[str]:
                                                                            else text)]
 
 
-def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
+def _heldout_lines(after: Optional[HeldOutComparison]) -> List[str]:
     """The held-out comparison: start, control, fine-tuned, and what is (not) reported."""
     if not after:
         return []
     lines = []
-    if after.get("underpowered"):
-        lines.append(f"- **WARNING: {after['underpowered']}**")
-    if not after.get("pairs"):
-        return lines + [f"- held-out episodes: none ran ({after.get('errors', 0)} with errors)"]
-    table = after.get("table", {})
-    lines.append(f"- held-out episodes: {after.get('pairs')} pairs{_sources_text(after)} ({after.get('errors')} with "
-                 f"errors left out); start {rate_text(after.get('before'))}"
-                 + (f", control {rate_text(after.get('control'))}" if after.get("control") else "")
-                 + f", fine-tuned {rate_text(after.get('after'))}; paired fine-tuned vs start: both failed "
-                 f"{table.get('both_fail')}, only start {table.get('before_only')}, only fine-tuned "
-                 f"{table.get('after_only')}, neither {table.get('neither')}"
-                 + ("" if after.get("mcnemar_p") is None else f", exact two-sided McNemar p = {after['mcnemar_p']:.3g}"))
+    if after.underpowered:
+        lines.append(f"- **WARNING: {after.underpowered}**")
+    if not after.pairs:
+        return lines + [f"- held-out episodes: none ran ({0 if after.errors is None else after.errors} with errors)"]
+    table = after.table or PairedTable()
+    lines.append(f"- held-out episodes: {after.pairs} pairs{_sources_text(after)} ({after.errors} with "
+                 f"errors left out); start {rate_text(after.before)}"
+                 + (f", control {rate_text(after.control)}" if after.control else "")
+                 + f", fine-tuned {rate_text(after.after)}; paired fine-tuned vs start: both failed "
+                 f"{table.both_fail}, only start {table.before_only}, only fine-tuned "
+                 f"{table.after_only}, neither {table.neither}"
+                 + ("" if after.mcnemar_p is None else f", exact two-sided McNemar p = {after.mcnemar_p:.3g}"))
     dependence = _dependence_line(after)
     if dependence:
         lines.append(dependence)
-    kinds = after.get("failure_types") or {}
+    kinds = after.failure_types
     if kinds:
         lines.append("- held-out failures by type: " + "; ".join(
-            f"{label} {by_type_text(kinds[role])}"
+            f"{label} {by_type_text(getattr(kinds, role))}"
             for role, label in (("start", "start"), ("control", "control"), ("fine_tuned", "fine-tuned"))
-            if role in kinds))
-    versus = after.get("vs_control") or {}
+            if getattr(kinds, role) is not None))
+    versus = after.vs_control
     if versus:
-        table = versus.get("table") or {}
-        lines.append(f"- paired fine-tuned vs control: both failed {table.get('both_fail')}, only control "
-                     f"{table.get('control_only')}, only fine-tuned {table.get('fine_tuned_only')}, neither "
-                     f"{table.get('neither')}"
-                     + ("" if versus.get("mcnemar_p") is None else f", exact two-sided McNemar p = {versus['mcnemar_p']:.3g}")
-                     + ("" if versus.get("relative_drop") is None
-                        else f", relative drop against the control {versus['relative_drop']:.0%}"))
-    elif not after.get("control"):
+        table = versus.table or ControlTable()
+        lines.append(f"- paired fine-tuned vs control: both failed {table.both_fail}, only control "
+                     f"{table.control_only}, only fine-tuned {table.fine_tuned_only}, neither "
+                     f"{table.neither}"
+                     + ("" if versus.mcnemar_p is None else f", exact two-sided McNemar p = {versus.mcnemar_p:.3g}")
+                     + ("" if versus.relative_drop is None
+                        else f", relative drop against the control {versus.relative_drop:.0%}"))
+    elif not after.control:
         lines.append("- no control arm in this round: a drop cannot be credited to the mined scenarios")
     for key, label in (("start", "the starting policy"), ("control", "the control")):
-        test = (after.get("significantly_worse") or {}).get(key)
+        test = after.held_out_test(key)
         if test:
             lines.append(f"- fine-tuned policy against {label} on the held-out families: "
                          f"**{'significantly worse' if test.get('worse') else 'not significantly worse'}** "
@@ -530,9 +528,9 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
                                          f"{100 * row['interval'][0]:+.1f} to {100 * row['interval'][1]:+.1f}; "
                                          f"{'non-inferior' if row['non_inferior'] else 'not shown'})"
                                          for name, row in rows.items()))
-    per = after.get("per_scenario") or {}
+    per = after.per_scenario or {}
     if per:
-        controls = versus.get("per_scenario") or {}
+        controls = (versus.per_scenario if versus else None) or {}
         lines += ["", "| held-out scenario | episodes | failed: start | control | fine-tuned |", "|---|---|---|---|---|"]
         lines += [f"| {name} | {row['n']} | {row['before']} | {controls.get(name, '-')} | {row['after']} |"
                   for name, row in per.items()]
@@ -590,21 +588,21 @@ def _settings_lines(settings: Mapping[str, Any]) -> List[str]:
     ]
 
 
-def _dependence_line(after: Mapping[str, Any]) -> Optional[str]:
+def _dependence_line(after: HeldOutComparison) -> Optional[str]:
     """What the held-out drop's interval resampled, and that the paired McNemar tests count pairs of one family as
     independent when they are not; ``None`` without a drop or test."""
-    interval = after.get("relative_drop_interval") or [None, None]
-    if after.get("relative_drop") is None and after.get("mcnemar_p") is None:
+    interval = after.relative_drop_interval or [None, None]
+    if after.relative_drop is None and after.mcnemar_p is None:
         return None
     parts = []
     if interval[0] is not None:
-        unit = after.get("relative_drop_interval_unit") or "scenario"
-        count = after.get("relative_drop_interval_units")
+        unit = after.relative_drop_interval_unit or "scenario"
+        count = after.relative_drop_interval_units
         what = "held-out families (the unit the split holds out)" if unit == "family" else "held-out scenarios"
         parts.append(f"the relative drop's 95 % interval [{interval[0]:.0%}, {interval[1]:.0%}] resamples whole "
                      + (f"{what}, {count} of them" if count is not None else what))
-    if after.get("mcnemar_p") is not None:
-        per_family = after.get("pairs_per_family") or {}
+    if after.mcnemar_p is not None:
+        per_family = after.pairs_per_family or {}
         largest = max(per_family.values()) if per_family else None
         parts.append("the McNemar tests pair episodes one by one, and pairs within one family (replays of one "
                      "failure, its conversion, their seeds) are not independent, so their p-values overstate the "
@@ -739,7 +737,7 @@ def _round_lines(record: RoundRecord, settings: Mapping[str, Any]) -> List[str]:
     lines += _split_lines(steps.split)
     lines += _fine_tuning_lines(steps)
     lines += _reference_lines(steps.reference)
-    lines += _heldout_lines(steps.after or {})
+    lines += _heldout_lines(steps.after)
     lines += _untouched_lines(steps.untouched)
     lines += _regression_lines(steps.regress)
     if record.next_policy:
@@ -871,7 +869,7 @@ def _round_figures(record: RoundRecord) -> str:
     """The round's failure rates as charts: held-out (start, control, fine-tuned) and untouched."""
     steps = record.steps
     after = steps.after or HeldOutComparison()
-    held = [(label, (rate or {}).get("rate"), (rate or {}).get("low"), (rate or {}).get("high"))
+    held = [(label, rate.rate, rate.low, rate.high) if rate is not None else (label, None, None, None)
             for label, rate in (("start", after.before), ("control", after.control), ("fine-tuned", after.after))]
     policies = (steps.untouched.policies if steps.untouched is not None else None) or {}
     untouched = [(label, ((policies.get(key) or {}).get("failure_rate") or {}).get("value"),

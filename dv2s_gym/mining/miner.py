@@ -145,7 +145,7 @@ class MineRun:
 
     def _errored_scenarios(self) -> str:
         """`` (scenario A 2, scenario B 1)``: where the errored episodes were; empty when none errored."""
-        counts = Counter(str(r.get("scenario")) for r in self.errors)
+        counts = Counter(str(r.scenario) for r in self.errors)
         return f" ({', '.join(f'{name} {n}' for name, n in sorted(counts.items()))})" if counts else ""
 
     def summary(self) -> str:
@@ -154,9 +154,9 @@ class MineRun:
         errors = len(self.errors)
         restarted = sum(1 for r in self.records if r.worker_restarts)
         failures = self.failures
-        kinds = Counter(r["failure"]["kind"] for r in failures)
-        kinds_by_type = Counter(r["failure"]["type"] for r in failures)
-        avoidable_clusters = {self.clusters[int(r["index"])] for r in self.avoidable}
+        kinds = Counter(r.failure["kind"] for r in failures)
+        kinds_by_type = Counter(r.failure["type"] for r in failures)
+        avoidable_clusters = {self.clusters[int(r.index)] for r in self.avoidable}
         status = Counter(c.get("status") for c in self.conversions)
         lines = [
             f"{len(self.records)} episodes of {self.policy} ({self.settings.sampler} sampler), "
@@ -170,7 +170,7 @@ class MineRun:
             f"{self.distinct_clusters} distinct behaviours"
             # without a reference driver no failure is known to be avoidable: no count of them
             + (f", {len(avoidable_clusters)} with avoidable failures" if self.settings.reference else "") + "; "
-            f"{len({(record_family(r), r['failure']['kind']) for r in failures})} (scenario family, failure type) "
+            f"{len({(record_family(r), r.failure['kind']) for r in failures})} (scenario family, failure type) "
             f"pairs, {len({record_family(r) for r in failures})} scenario families with a failure; "
             f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
         ]
@@ -178,7 +178,7 @@ class MineRun:
             lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
                          f"{status.get('merged', 0)}, rejected {status.get('rejected', 0)}")
         if errors:
-            first = str(self.errors[0]["error"]).strip().splitlines()
+            first = str(self.errors[0].error).strip().splitlines()
             lines.append(error_warning(errors, len(self.records), first[-1] if first else ""))
         return "\n".join(lines)
 
@@ -334,7 +334,7 @@ def _restore_sampler(mining: _Mining, records: Dict[int, EpisodeRecord]) -> Scen
         for offset, (point, info) in enumerate(drawn):
             index = chunk * batch + offset
             spec = space.decode(point)
-            if spec.scenario != records[index]["scenario"] or spec.params != records[index]["params"]:
+            if spec.scenario != records[index].scenario or spec.params != records[index].params:
                 raise MiningError(f"{out}: episode {index} in episodes.jsonl does not match the sampler's draw "
                                   "(the run was made by another version); pass another --out")
             sampler.feed(point, info, _feedback(records[index], seen, mining.settings.feedback))
@@ -374,9 +374,9 @@ def _restore_window(mining: _Mining, records: Dict[int, EpisodeRecord]) -> Windo
 
 
 def _matcher(out: Path, space) -> Any:
-    def check(index: int, point: Any, record: Dict[str, Any]) -> None:
+    def check(index: int, point: Any, record: EpisodeRecord) -> None:
         spec = space.decode(point)
-        if spec.scenario != record["scenario"] or spec.params != record["params"]:
+        if spec.scenario != record.scenario or spec.params != record.params:
             raise MiningError(f"{out}: episode {index} in episodes.jsonl does not match the sampler's draw "
                               "(the run was made by another version); pass another --out")
     return check
@@ -476,20 +476,20 @@ def _feedback(record: EpisodeRecord, seen: set, mode: str) -> float:
     rho = record.rho
     if rho is None or record.error:
         return 1.0
-    if record.get("failure") and mode == "cluster-novelty":
+    if record.failure and mode == "cluster-novelty":
         cluster = ("cluster", cluster_id(record))
         repeat = cluster in seen
         seen.add(cluster)
         return _REPEAT if repeat else float(rho)
-    if record.get("failure") and mode == "state-novelty":
-        state = record.get("failure_state")
-        scenario = str(record["scenario"])
+    if record.failure and mode == "state-novelty":
+        state = record.failure_state
+        scenario = str(record.scenario)
         archive = [entry[2:] for entry in seen if isinstance(entry, tuple) and entry[:2] == ("state", scenario)]
         if state is not None:
             seen.add(("state", scenario) + tuple(float(x) for x in state))
         return float(rho) if is_novel(state, archive) else _REPEAT
-    if record.get("failure"):
-        cluster = cell_id(record) if mode != "scenario-novelty" else f"scenario:{record['scenario']}"
+    if record.failure:
+        cluster = cell_id(record) if mode != "scenario-novelty" else f"scenario:{record.scenario}"
         repeat = cluster in seen
         seen.add(cluster)
         if repeat and mode in ("novelty", "scenario-novelty"):
@@ -600,7 +600,7 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
         1 if workers.backend == "local" and default_workers() < 2 else default_workers())
     with _run_lock(out):
         mining = _open_run(out, policy, settings.replace(bank_dir=bank_dir), origin)
-        done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
+        done = {int(r.index): r for r in read_records(out / "episodes.jsonl")}
         _run_episodes(mining, done, workers, n_workers, progress)
         records = [done[i] for i in sorted(done) if i < settings.budget]
         run = MineRun(out=out, policy=policy, settings=mining.settings, records=records,
@@ -741,8 +741,8 @@ def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: 
         if cluster in converted or not avoidable or any(r.index in converted_episodes for r in members):
             continue
         # a failure whose scene the reference driver passed first: only such a scene gets an exact replay entry
-        representative = min(avoidable, key=lambda r: (not reference_passed(r), float(r.get("rho") or 0.0),
-                                                       int(r["index"])))
+        representative = min(avoidable, key=lambda r: (not reference_passed(r), float(r.rho or 0.0),
+                                                       int(r.index)))
         candidates.append((-len(avoidable), cluster, representative))
     candidates.sort(key=lambda c: (c[0], c[1]))  # the clusters with most avoidable failures first
     room = None if max_conversions is None else max(0, int(max_conversions) - len(existing))

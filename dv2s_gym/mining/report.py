@@ -2,9 +2,10 @@
 
 :func:`build_report` reads a run folder (``settings.json``, ``episodes.jsonl`` as
 :class:`~scenario_bank.records.EpisodeRecord`, ``conversions.jsonl``; record formats in the mining contract), groups
-the failures into clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns a JSON-safe
-dict (in process each failure is a :class:`FailureEntry` and each cluster a :class:`ClusterEntry`, whose
-``to_dict`` is the JSON below); :func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
+the failures into clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns the report as a
+:class:`~dv2s_gym.mining.report_record.MineReport`, whose ``to_dict`` is the JSON below (in process each failure is
+a :class:`FailureEntry` and each cluster a :class:`ClusterEntry` before the report holds their JSON objects);
+:func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
 self-contained ``report.html`` (:mod:`dv2s_gym.mining.html`). Nothing here imports Scenic
 or highway-env, so a report is rebuilt in well under a second from any run folder, also
 from one whose run was killed (a truncated last line of a ``.jsonl`` file is left out).
@@ -102,6 +103,7 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family
 from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.rate import FailureRate, rate_estimates
+from dv2s_gym.mining.report_record import MineReport
 from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, by_type_text, error_warning,
                                          not_compared_counts, parameter_check_text, rate_text, seed_text)
 from dv2s_gym.mining.report_text import number_text as _num
@@ -414,8 +416,9 @@ def _cluster_of(records: Sequence[EpisodeRecord]) -> Dict[int, str]:
 
 
 # --------------------------------------------------------------------------------- report
-def build_report(run_dir: PathLike, *, created: Optional[str] = None) -> Dict[str, Any]:
-    """The report dict (schema in the module docstring) of the run folder ``run_dir``.
+def build_report(run_dir: PathLike, *, created: Optional[str] = None) -> MineReport:
+    """The report (:class:`~dv2s_gym.mining.report_record.MineReport`; schema in the module docstring) of the run
+    folder ``run_dir``.
 
     Raises :class:`MiningReportError` for a folder that is not a mining run or holds
     damaged records.
@@ -424,9 +427,7 @@ def build_report(run_dir: PathLike, *, created: Optional[str] = None) -> Dict[st
     failed = [r for r in episodes if r.failed]
     clusters = _cluster_of(episodes) if failed else {}
     report = build_report_from_records(settings.values, episodes, conversions, clusters, created=created)
-    report["run_dir"] = str(run_dir)
-    report["skipped_lines"] = skipped
-    return report
+    return report.replace(run_dir=str(run_dir), skipped_lines=dict(skipped))
 
 
 def _episode_errors(episodes: Sequence[EpisodeRecord], default_sampler: str) -> List[Dict[str, Any]]:
@@ -657,9 +658,10 @@ def _per_scenario(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord]
 
 def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord],
                               conversions: Sequence[Mapping[str, Any]], clusters: Mapping[int, str], *,
-                              created: Optional[str] = None) -> Dict[str, Any]:
-    """The report dict from records already read: ``settings`` (the run's ``settings.json``), its episode records,
-    its conversion records, and ``clusters``, which maps each failed episode's index to its cluster id.
+                              created: Optional[str] = None) -> MineReport:
+    """The report (:class:`~dv2s_gym.mining.report_record.MineReport`) from records already read: ``settings`` (the
+    run's ``settings.json``), its episode records, its conversion records, and ``clusters``, which maps each failed
+    episode's index to its cluster id.
 
     Raises :class:`MiningReportError` when a failed episode has no cluster id.
     """
@@ -697,7 +699,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ep
         "worker_restarts": restarts,
         "skipped_lines": {},
     }
-    return _clean(report)
+    return MineReport.from_dict(_clean(report))
 
 
 
@@ -739,40 +741,43 @@ def _cell(value: Any) -> str:
     return str("-" if value is None else value).replace("\n", " ").replace("|", "\\|")
 
 
-def headline(report: Mapping[str, Any]) -> str:
-    """One line: what was mined and what came of it."""
-    counts, settings = report["counts"], report["settings"]
+def headline(report: Union[MineReport, Mapping[str, Any]]) -> str:
+    """One line: what was mined and what came of it (``report``: a :class:`MineReport` or the object
+    ``report.json`` holds)."""
+    report = MineReport.from_dict(report)
+    counts, settings = report.counts, report.settings
     return (f"policy `{settings.get('policy')}`, sampler {settings.get('sampler')}, {seed_text(settings)}: "
-            f"{counts['failures']} failure(s) in {counts['episodes']} episode(s) "
-            f"({counts['avoidable']} avoidable, {counts['unavoidable']} unavoidable, "
-            f"{counts['avoidability_unknown']} unknown), {counts['clusters']} distinct behaviour(s) "
-            f"({counts['avoidable_clusters']} avoidable); converted {counts['converted']}: kept {counts['kept']}, "
-            f"merged {counts['merged']}, rejected {counts['rejected']}"
-            + (f"; {counts['errors']} error(s)" if counts["errors"] else "")
-            + (f". {_error_alarm(report)}" if counts["errors"] else ""))
+            f"{counts.failures} failure(s) in {counts.episodes} episode(s) "
+            f"({counts.avoidable} avoidable, {counts.unavoidable} unavoidable, "
+            f"{counts.avoidability_unknown} unknown), {counts.clusters} distinct behaviour(s) "
+            f"({counts.avoidable_clusters} avoidable); converted {counts.converted}: kept {counts.kept}, "
+            f"merged {counts.merged}, rejected {counts.rejected}"
+            + (f"; {counts.errors} error(s)" if counts.errors else "")
+            + (f". {_error_alarm(report)}" if counts.errors else ""))
 
 
-def _error_alarm(report: Mapping[str, Any]) -> str:
-    errors = report.get("errors") or []
+def _error_alarm(report: MineReport) -> str:
+    errors = report.errors
     first = str(errors[0].get("error") or "").strip().splitlines() if errors else []
-    counts = report["counts"]
-    return error_warning(counts["errors"], counts["errors"] + counts["episodes"], first[-1] if first else "")
+    counts = report.counts
+    return error_warning(counts.errors, counts.errors + counts.episodes, first[-1] if first else "")
 
 
-def format_summary(report: Mapping[str, Any]) -> str:
+def format_summary(report: Union[MineReport, Mapping[str, Any]]) -> str:
     """The plain-text summary ``dv2s mine`` prints: the headline and the per-sampler table."""
+    report = MineReport.from_dict(report)
     rows = [("sampler", "episodes", "failures", "per 100 [95% CI]", "avoidable per 100", "clusters",
              "clusters per 100")]
-    for name, entry in report["samplers"].items():
-        rows.append((name, str(entry["episodes"]), str(entry["failures"]), _per_100_text(entry["failures_per_100"]),
-                     _per_100_text(entry["avoidable_failures_per_100"]), str(entry["clusters"]),
-                     _num(entry["clusters_per_100"])))
+    for name, entry in report.samplers.items():
+        rows.append((name, str(entry.episodes), str(entry.failures), _per_100_text(entry.failures_per_100),
+                     _per_100_text(entry.avoidable_failures_per_100), str(entry.clusters),
+                     _num(entry.clusters_per_100)))
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    lines = [headline(report).replace("`", ""), breadth(report["counts"]), rate_text(report.get("failure_rate"))]
+    lines = [headline(report).replace("`", ""), breadth(report.counts), rate_text(report.failure_rate)]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
-    if report["rejected"]:
-        lines.append("rejected: " + "; ".join(f"{r['cluster']} ({r['reason']})" for r in report["rejected"][:3])
-                     + (" ..." if len(report["rejected"]) > 3 else ""))
+    if report.rejected:
+        lines.append("rejected: " + "; ".join(f"{r['cluster']} ({r['reason']})" for r in report.rejected[:3])
+                     + (" ..." if len(report.rejected) > 3 else ""))
     return "\n".join(lines)
 
 
@@ -798,30 +803,30 @@ def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
     return lines
 
 
-def _summary_lines(report: Mapping[str, Any]) -> List[str]:
+def _summary_lines(report: MineReport) -> List[str]:
     """The report's title, headline, breadth and failure rate, the table of counts, failures by type and the
     conversions' times."""
-    counts = report["counts"]
-    lines = [f"## dv2s mine: {counts['avoidable_clusters']} avoidable failure cluster(s)", "", headline(report), "",
-             breadth(counts) + ".", "", rate_text(report.get("failure_rate")), ""]
+    counts = report.counts
+    lines = [f"## dv2s mine: {counts.avoidable_clusters} avoidable failure cluster(s)", "", headline(report), "",
+             breadth(counts) + ".", "", rate_text(report.failure_rate), ""]
     lines += ["| failures | avoidable | unavoidable | unknown | clusters | avoidable clusters | converted | kept | "
               "merged | rejected | errors |", "|" + "---:|" * 11,
-              f"| {counts['failures']} | {counts['avoidable']} | {counts['unavoidable']} | "
-              f"{counts['avoidability_unknown']} | {counts['clusters']} | {counts['avoidable_clusters']} | "
-              f"{counts['converted']} | {counts['kept']} | {counts['merged']} | {counts['rejected']} | "
-              f"{counts['errors']} |", ""]
-    if counts["failures_by_type"]:
-        lines += ["Failures by type: " + by_type_text(counts["failures_by_type"]), ""]
-    seconds = counts["conversion_seconds"]
+              f"| {counts.failures} | {counts.avoidable} | {counts.unavoidable} | "
+              f"{counts.avoidability_unknown} | {counts.clusters} | {counts.avoidable_clusters} | "
+              f"{counts.converted} | {counts.kept} | {counts.merged} | {counts.rejected} | "
+              f"{counts.errors} |", ""]
+    if counts.failures_by_type:
+        lines += ["Failures by type: " + by_type_text(counts.failures_by_type), ""]
+    seconds = counts.conversion_seconds
     if seconds["n"]:
-        stages = counts.get("conversion_stage_seconds") or {}
+        stages = counts.conversion_stage_seconds or {}
         lines += [f"Conversion time: median {seconds['median']:.2f} s, max {seconds['max']:.2f} s over "
                   f"{seconds['n']} conversion(s)" + ("; median per stage: " + ", ".join(
                       f"{stage} {value:.2f} s" for stage, value in stages.items()) if stages else "") + ".", ""]
     return lines
 
 
-def _sampler_lines(report: Mapping[str, Any]) -> List[str]:
+def _sampler_lines(report: MineReport) -> List[str]:
     """The per-sampler section: failures and clusters per 100 episodes, and the first failure."""
     lines = ["### Per sampler", "",
              "Failures per 100 episodes with Wilson 95% intervals (an adaptive sampler's episodes are not "
@@ -829,15 +834,15 @@ def _sampler_lines(report: Mapping[str, Any]) -> List[str]:
              "| sampler | episodes | failures | failures per 100 | avoidable per 100 | clusters | clusters per 100 | "
              "avoidable clusters | first failure at episode |",
              "|---|---:|---:|---|---|---:|---:|---:|---:|"]
-    for name, s in report["samplers"].items():
-        lines.append(f"| {_cell(name)} | {s['episodes']} | {s['failures']} | {_per_100_text(s['failures_per_100'])} | "
-                     f"{_per_100_text(s['avoidable_failures_per_100'])} | {s['clusters']} | "
-                     f"{_num(s['clusters_per_100'])} | {s['avoidable_clusters']} | "
-                     f"{_cell(s['episodes_to_first_failure'])} |")
+    for name, s in report.samplers.items():
+        lines.append(f"| {_cell(name)} | {s.episodes} | {s.failures} | {_per_100_text(s.failures_per_100)} | "
+                     f"{_per_100_text(s.avoidable_failures_per_100)} | {s.clusters} | "
+                     f"{_num(s.clusters_per_100)} | {s.avoidable_clusters} | "
+                     f"{_cell(s.episodes_to_first_failure)} |")
     return lines
 
 
-def _scenario_lines(report: Mapping[str, Any]) -> List[str]:
+def _scenario_lines(report: MineReport) -> List[str]:
     """The per-scenario section: sampled and estimated failure rates, failure types, behaviours and conversions."""
     lines = ["", "### Per scenario", "",
              "Sampled failure rate: failures per episode as the sampler drew them; estimated: under the scenario's "
@@ -845,7 +850,7 @@ def _scenario_lines(report: Mapping[str, Any]) -> List[str]:
              "| scenario | episodes | failures | sampled failure rate [95% CI] | estimated rate [95% CI] (ESS) | "
              "failure types | avoidable | unavoidable | behaviours | converted | kept |",
              "|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|"]
-    for name, s in report["scenarios"].items():
+    for name, s in report.scenarios.items():
         estimate = s.get("estimated_rate")
         estimated = f"{_pct(estimate)} ({_num((estimate or {}).get('ess'))})" if estimate else "-"
         lines.append(f"| `{_cell(name)}` | {s['episodes']} | {s['failures']} | {_pct(s['failure_rate'])} | "
@@ -854,19 +859,19 @@ def _scenario_lines(report: Mapping[str, Any]) -> List[str]:
     return lines
 
 
-def _cluster_lines(report: Mapping[str, Any]) -> List[str]:
+def _cluster_lines(report: MineReport) -> List[str]:
     """The failure clusters' section: a table of the clusters that count against the policy."""
-    lines = ["", f"### Failure clusters ({len(report['clusters'])})", ""]
-    lines += _cluster_rows(report["clusters"]) if report["clusters"] else ["None."]
+    lines = ["", f"### Failure clusters ({len(report.clusters)})", ""]
+    lines += _cluster_rows(report.clusters) if report.clusters else ["None."]
     return lines
 
 
-def _converted_lines(report: Mapping[str, Any]) -> List[str]:
+def _converted_lines(report: MineReport) -> List[str]:
     """The converted failures' section (kept first, then merged: where each went, its reproduction, video and
     script), and the count of the conversions' parameter check."""
-    counts = report["counts"]
+    counts = report.counts
     lines: List[str] = []
-    converted = [c for c in report["clusters"] + report["unavoidable_clusters"] if c.get("conversion")]
+    converted = [c for c in report.clusters + report.unavoidable_clusters if c.get("conversion")]
     described = sorted((c for c in converted if c["status"] in ("kept", "merged")), key=lambda c: c["status"] != "kept")
     if described:
         lines += ["", "### Converted failures", ""]
@@ -879,7 +884,7 @@ def _converted_lines(report: Mapping[str, Any]) -> List[str]:
             if c.get("description"):
                 lines.append(f"  > {_cell(c['description'])}")
     lines += _replay_entry_lines(converted)
-    if counts.get("parameters_compared") or counts.get("parameters_not_compared"):
+    if counts.parameters_compared or counts.parameters_not_compared:
         lines += ["", parameter_check_text(counts) + " (each conversion record lists the parameters not compared, "
                       "with why, under `parameters.not_comparable`)."]
     return lines
@@ -902,67 +907,68 @@ def _replay_entry_lines(converted: Sequence[Mapping[str, Any]]) -> List[str]:
     return lines
 
 
-def _rejected_lines(report: Mapping[str, Any]) -> List[str]:
+def _rejected_lines(report: MineReport) -> List[str]:
     """The rejected conversions' section: counts by stage and a table of each with its reason (none: nothing)."""
-    if not report["rejected"]:
+    if not report.rejected:
         return []
-    lines = ["", f"### Rejected conversions ({len(report['rejected'])})", "",
-             "By stage: " + ", ".join(f"{s} {n}" for s, n in report["counts"]["rejected_by_stage"].items()), "",
+    lines = ["", f"### Rejected conversions ({len(report.rejected)})", "",
+             "By stage: " + ", ".join(f"{s} {n}" for s, n in report.counts.rejected_by_stage.items()), "",
              "| cluster | episode | stage | reason |", "|---|---:|---|---|"]
     lines += [f"| `{_cell(r['cluster'])}` | {_cell(r['index'])} | {_cell(r['stage'])} | {_cell(r['reason'])} |"
-              for r in report["rejected"]]
+              for r in report.rejected]
     return lines
 
 
-def _unavoidable_lines(report: Mapping[str, Any]) -> List[str]:
+def _unavoidable_lines(report: MineReport) -> List[str]:
     """The unavoidable failures' section: their clusters' table and a line per failure (the first 50)."""
-    lines = ["", f"### Unavoidable failures ({len(report['unavoidable'])})", "",
+    lines = ["", f"### Unavoidable failures ({len(report.unavoidable)})", "",
              "The reference driver failed in the same scene too; these do not count against the policy."]
-    if report["unavoidable_clusters"]:
-        lines += [""] + _cluster_rows(report["unavoidable_clusters"])
-    if report["unavoidable"]:
+    if report.unavoidable_clusters:
+        lines += [""] + _cluster_rows(report.unavoidable_clusters)
+    if report.unavoidable:
         lines += [""] + [f"- #{f['index']} `{_cell(f['scenario'])}` seed {f['seed']}: {f['type']} "
                          f"(reference: {_cell(((f.get('reference') or {}).get('failure') or {}).get('type'))}); "
-                         f"cluster `{_cell(f['cluster'])}`" for f in report["unavoidable"][:50]]
-        if len(report["unavoidable"]) > 50:
-            lines.append(f"- ... and {len(report['unavoidable']) - 50} more (see report.json)")
+                         f"cluster `{_cell(f['cluster'])}`" for f in report.unavoidable[:50]]
+        if len(report.unavoidable) > 50:
+            lines.append(f"- ... and {len(report.unavoidable) - 50} more (see report.json)")
     return lines
 
 
-def _replay_lines(report: Mapping[str, Any]) -> List[str]:
+def _replay_lines(report: MineReport) -> List[str]:
     """The command that replays a failure exactly from its trace (none without a failure that has one)."""
-    if not report["failures"]:
+    if not report.failures:
         return []
-    example = next((f for f in report["failures"] if f.get("trace")), None)
+    example = next((f for f in report.failures if f.get("trace")), None)
     if not example:
         return []
-    return ["", f"Replay a failure exactly from its trace: `dv2s replay {report.get('run_dir') or '.'}/"
+    return ["", f"Replay a failure exactly from its trace: `dv2s replay {report.run_dir or '.'}/"
                 f"{example['trace']} --video failure.webm`."]
 
 
-def _trouble_lines(report: Mapping[str, Any]) -> List[str]:
+def _trouble_lines(report: MineReport) -> List[str]:
     """What went wrong while mining: the episodes that errored (the first 20), those a new worker finished, and
     the truncated lines of a killed run left out."""
     lines: List[str] = []
-    if report["errors"]:
-        lines += ["", f"### Errors ({len(report['errors'])})", ""]
+    if report.errors:
+        lines += ["", f"### Errors ({len(report.errors)})", ""]
         lines += [f"- #{e['index']} `{_cell(e['scenario'])}` seed {e['seed']}: {_cell(e['error'].splitlines()[0] if e['error'] else '')}"
-                  for e in report["errors"][:20]]
-        if len(report["errors"]) > 20:
-            lines.append(f"- ... and {len(report['errors']) - 20} more (see report.json)")
-    if report.get("worker_restarts"):
-        lines += ["", f"### Worker restarts ({len(report['worker_restarts'])})", "",
+                  for e in report.errors[:20]]
+        if len(report.errors) > 20:
+            lines.append(f"- ... and {len(report.errors) - 20} more (see report.json)")
+    if report.worker_restarts:
+        lines += ["", f"### Worker restarts ({len(report.worker_restarts)})", "",
                   "Episodes whose worker crashed or hung (`--timeout`) and were finished by a new worker:", ""]
         lines += [f"- #{r['index']} `{_cell(r['scenario'])}` seed {r['seed']}: {_cell('; then '.join(r['problems']))}"
-                  for r in report["worker_restarts"][:20]]
-    if report.get("skipped_lines"):
+                  for r in report.worker_restarts[:20]]
+    if report.skipped_lines:
         lines += ["", "Left out (truncated last lines of a killed run): "
-                  + ", ".join(f"{name} {n}" for name, n in report["skipped_lines"].items())]
+                  + ", ".join(f"{name} {n}" for name, n in report.skipped_lines.items())]
     return lines
 
 
-def markdown(report: Mapping[str, Any]) -> str:
+def markdown(report: Union[MineReport, Mapping[str, Any]]) -> str:
     """The report as Markdown: summary, per sampler, per scenario, clusters, conversions, unavoidable, errors."""
+    report = MineReport.from_dict(report)
     lines = (_summary_lines(report) + _sampler_lines(report) + _scenario_lines(report) + _cluster_lines(report)
              + _converted_lines(report) + _rejected_lines(report) + _unavoidable_lines(report)
              + _replay_lines(report) + _trouble_lines(report))
@@ -970,20 +976,21 @@ def markdown(report: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def write_reports(run_dir: PathLike, report: Optional[Mapping[str, Any]] = None, *, embed_videos: bool = True
-                  ) -> Dict[str, Path]:
+def write_reports(run_dir: PathLike, report: Union[MineReport, Mapping[str, Any], None] = None, *,
+                  embed_videos: bool = True) -> Dict[str, Path]:
     """Write ``report.json`` (atomic), ``report.md`` and ``report.html`` into the run folder.
 
     Args:
         run_dir: the run folder (``--out`` of ``dv2s mine``).
-        report: a report already built from it (default: :func:`build_report`).
+        report: a report already built from it (a :class:`MineReport` or the JSON object ``report.json`` holds;
+            default: :func:`build_report`).
         embed_videos: embed the failure videos in the HTML page (else it links them relatively).
 
     Returns:
         ``{"json": path, "markdown": path, "html": path}``.
     """
     run_dir = Path(run_dir)
-    report = dict(report) if report is not None else build_report(run_dir)
-    return {"json": atomic_write_json(run_dir / "report.json", report),
+    report = MineReport.from_dict(report) if report is not None else build_report(run_dir)
+    return {"json": atomic_write_json(run_dir / "report.json", report.to_dict()),
             "markdown": atomic_write_text(run_dir / "report.md", markdown(report)),
             "html": write_html(report, run_dir / "report.html", base=run_dir, embed_videos=embed_videos)}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
+from dv2s_gym.mining.report_record import MineCounts
 from scenario_bank.failure_types import severity_order, type_label
 
 __all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
@@ -107,13 +108,13 @@ def by_type_text(by_type: Mapping[str, int]) -> str:
     return ", ".join(f"{type_label(name)} {by_type[name]}" for name in severity_order(by_type)) or "none"
 
 
-def breadth(counts: Mapping[str, Any]) -> str:
+def breadth(counts: MineCounts) -> str:
     """How broad the failures found are: failures, distinct behaviours, (scenario, failure type) pairs, scenarios
     with a failure, and the failures per type (:func:`by_type_text`)."""
-    return (f"{counts['failures']} failure(s): {counts['behaviours']} distinct behaviour(s), "
-            f"{counts.get('scenario_failure_types', 0)} (scenario family, failure type) pair(s), "
-            f"{counts.get('scenarios_failing', 0)} scenario famil(ies) with a failure; by type: "
-            f"{by_type_text(counts.get('failures_by_type') or {})}")
+    return (f"{counts.failures} failure(s): {counts.behaviours} distinct behaviour(s), "
+            f"{counts.scenario_failure_types} (scenario family, failure type) pair(s), "
+            f"{counts.scenarios_failing} scenario famil(ies) with a failure; by type: "
+            f"{by_type_text(counts.failures_by_type or {})}")
 
 
 def rate_text(rate: Optional[Mapping[str, Any]]) -> str:
@@ -148,13 +149,13 @@ def error_warning(errors: int, episodes: int, first: str) -> str:
             "and rerun")
 
 
-def parameter_check_text(counts: Mapping[str, Any]) -> str:
+def parameter_check_text(counts: MineCounts) -> str:
     """``"Parameter check of the conversions: 3 failing parameter value(s) compared with the new scripts' ranges, 3
     not compared: 2 with no counterpart in the new script, 1 ..."``, from a mining report's ``counts`` (as
     :func:`dv2s_gym.mining.report.build_report` makes them)."""
-    text = (f"Parameter check of the conversions: {counts['parameters_compared']} failing parameter value(s) "
-            f"compared with the new scripts' ranges, {counts['parameters_not_compared']} not compared")
-    reasons = not_compared_text(counts["parameters_not_compared_by_reason"])
+    text = (f"Parameter check of the conversions: {counts.parameters_compared} failing parameter value(s) "
+            f"compared with the new scripts' ranges, {counts.parameters_not_compared} not compared")
+    reasons = not_compared_text(counts.parameters_not_compared_by_reason)
     return text + (f": {reasons}" if reasons else "")
 
 
