@@ -35,21 +35,48 @@ from __future__ import annotations
 import inspect
 import re
 import shutil
+from importlib import import_module
 from pathlib import Path
-from typing import Any, Callable, Dict, Optional
+from typing import TYPE_CHECKING, Any, Callable, Dict, Iterator, Optional
 
 import pytest
 
-from dv2s_gym.regress.assertions import RegressionFailed, RegressionReport
-from dv2s_gym.workers.backends import backend_choices
-from dv2s_gym.regress.errors import RegressError
-from scenario_bank.errors import WrongTypeError
+if TYPE_CHECKING:
+    from dv2s_gym.regress.assertions import RegressionReport
 
-__all__ = ["RegressionReport", "RegressionFailed", "MARKER"]
+# pytest loads this module in every session of an environment with dv2s-gym installed, so it imports only
+# pytest here; the project (and with it Gymnasium and the env registration) loads when a test uses the plugin.
+__all__ = ["RegressionReport", "RegressionFailed", "MARKER", "regression_arguments"]
 
 MARKER = "dv2s_regression"
-_REPORT = pytest.StashKey[RegressionReport]()
+_REPORT = pytest.StashKey["RegressionReport"]()
 _ALLOW = pytest.StashKey[bool]()
+_EXPORTS = {"RegressionReport": "dv2s_gym.regress.assertions", "RegressionFailed": "dv2s_gym.regress.assertions"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+class _BackendChoices:
+    """The ``--dv2s-backend`` choices, read from :mod:`dv2s_gym.workers.backends` only when pytest checks a
+    given value or prints its help."""
+
+    def _names(self):
+        from dv2s_gym.workers.backends import backend_choices
+
+        return backend_choices()
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._names()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names())
+
+    def __len__(self) -> int:
+        return len(self._names())
 
 
 _SETTINGS = ("scenarios", "episodes", "seed", "margin", "alpha", "mde", "power", "sequential", "env_config",
@@ -62,6 +89,8 @@ def regression_arguments(policy: str, baseline: Optional[str] = None, *, baselin
     """The keyword arguments of :func:`~dv2s_gym.regress.runner.run_regression` for one check: the candidate
     ``policy``, ``baseline`` or ``baseline_report``, the ``timeout`` per episode, and any of ``_SETTINGS``
     (``scenarios`` may be one name); an unknown argument is a ``TypeError``."""
+    from scenario_bank.errors import WrongTypeError
+
     unknown = sorted(set(settings) - set(_SETTINGS))
     if unknown:
         raise WrongTypeError(f"got an unexpected keyword argument {unknown[0]!r}; pass only the settings: "
@@ -82,7 +111,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                     help="worker processes per regression (default: every core)")
     group.addoption("--dv2s-report-dir", default=None, metavar="DIR",
                     help="write each test's regression report to DIR/<test>/ (default: pytest's temporary folder)")
-    group.addoption("--dv2s-backend", choices=backend_choices(), default="local",
+    group.addoption("--dv2s-backend", choices=_BackendChoices(), default="local",
                     help="where regression episodes run (default: local processes)")
     group.addoption("--dv2s-address", default=None, metavar="HOST:PORT",
                     help="with --dv2s-backend ray: the Ray cluster's address")
@@ -115,6 +144,8 @@ def _out_dir(request: pytest.FixtureRequest, factory: pytest.TempPathFactory, su
 
 
 def _run(request: pytest.FixtureRequest, out: Path, arguments: Dict[str, Any]) -> RegressionReport:
+    from dv2s_gym.regress.assertions import RegressionReport
+    from dv2s_gym.regress.errors import RegressError
     from dv2s_gym.regress.runner import BaselineReport, RegressSettings, WorkerSettings, run_regression
 
     config = request.config
