@@ -41,11 +41,13 @@ from typing import TYPE_CHECKING, Any, Callable, Dict, Iterator, Optional
 
 import pytest
 
+from scenario_bank.errors import WrongTypeError  # loaded with the package anyway (its env registration)
+
 if TYPE_CHECKING:
     from dv2s_gym.regress.assertions import RegressionReport
 
-# pytest loads this module in every session of an environment with dv2s-gym installed, so it imports only
-# pytest here; the project (and with it Gymnasium and the env registration) loads when a test uses the plugin.
+# pytest loads this module in every session of an environment with dv2s-gym installed, so it adds nothing to what
+# its package loads: the regression runner, its errors and the worker backends load when a test uses the plugin.
 __all__ = ["RegressionReport", "RegressionFailed", "MARKER", "regression_arguments"]
 
 MARKER = "dv2s_regression"
@@ -89,8 +91,6 @@ def regression_arguments(policy: str, baseline: Optional[str] = None, *, baselin
     """The keyword arguments of :func:`~dv2s_gym.regress.runner.run_regression` for one check: the candidate
     ``policy``, ``baseline`` or ``baseline_report``, the ``timeout`` per episode, and any of ``_SETTINGS``
     (``scenarios`` may be one name); an unknown argument is a ``TypeError``."""
-    from scenario_bank.errors import WrongTypeError
-
     unknown = sorted(set(settings) - set(_SETTINGS))
     if unknown:
         raise WrongTypeError(f"got an unexpected keyword argument {unknown[0]!r}; pass only the settings: "
