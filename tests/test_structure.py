@@ -923,7 +923,7 @@ def test_the_parts_of_dv2s_gym_import_one_way():
         return None if pieces[0] != "dv2s_gym" else pieces[1] if len(pieces) > 1 else "__init__"
 
     graph = import_graph()
-    parts = {part(m) for m in graph} - {None, "evalset", "evalset_highway_env"}  # the evaluation sets are data
+    parts = {part(m) for m in graph} - {None, "evalset"}  # the evaluation set is data
     assert parts == set(SUBSYSTEMS), f"a part of dv2s_gym/ without a place in SUBSYSTEMS: {parts ^ set(SUBSYSTEMS)}"
     rank = {name: i for i, name in enumerate(SUBSYSTEMS)}
     wrong = sorted(f"{m} imports {t}" for m, ts in graph.items() if part(m) in rank for t in ts
@@ -2399,8 +2399,8 @@ def test_the_readme_pictures_the_layout():
     assert top[:4] == [f"{package}/" for package in PACKAGES], "the four layers, bottom first"
     assert {"bench/", "scripts/", "tests/", "docs/"} <= set(top)
     parts = [name.rstrip("/").removesuffix(".py") for name in children["dv2s_gym/"]]
-    assert parts == list(SUBSYSTEMS) + ["evalset", "evalset_highway_env"], \
-        f"dv2s_gym's parts in the picture, against SUBSYSTEMS and the two evaluation sets: {parts}"
+    assert parts == list(SUBSYSTEMS) + ["evalset"], \
+        f"dv2s_gym's parts in the picture, against SUBSYSTEMS and the evaluation set: {parts}"
     on_disk = {path.name for path in (ROOT / "dv2s_gym").iterdir()
                if path.suffix == ".py" or (path.is_dir() and (path / "__init__.py").exists())} - {"__main__.py"}
     assert on_disk <= set(children["dv2s_gym/"]) | {name.rstrip("/") for name in children["dv2s_gym/"]}
