@@ -2684,7 +2684,7 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                               "it is a programming fault, Python's convention",
     "policies.registry:Policy.act:NotImplementedError": "an abstract method (Python's convention)",
     "policies.state_driver:StateDriver.act:NotImplementedError": "an abstract method (Python's convention)",
-    "dv2s_gym.pipeline.semantics.text:ParsedDescription.index:ValueError": "list.index's contract: ValueError when "
+    "dv2s_gym.pipeline.semantics.parsed:ParsedDescription.index:ValueError": "list.index's contract: ValueError when "
                                                                            "the item is not there",
     "dv2s_gym.mining.jsonl:JsonlAppender.append:OSError": "the operating system's error raised again with the "
                                                           "file's path (errno kept); the command line reports an "
