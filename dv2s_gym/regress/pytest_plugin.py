@@ -35,7 +35,6 @@ from __future__ import annotations
 import inspect
 import re
 import shutil
-from importlib import import_module
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Dict, Iterator, Optional
 
@@ -48,18 +47,11 @@ if TYPE_CHECKING:
 
 # pytest loads this module in every session of an environment with dv2s-gym installed, so it adds nothing to what
 # its package loads: the regression runner, its errors and the worker backends load when a test uses the plugin.
-__all__ = ["RegressionReport", "RegressionFailed", "MARKER", "regression_arguments"]
+__all__ = ["MARKER", "regression_arguments"]
 
 MARKER = "dv2s_regression"
 _REPORT = pytest.StashKey["RegressionReport"]()
 _ALLOW = pytest.StashKey[bool]()
-_EXPORTS = {"RegressionReport": "dv2s_gym.regress.assertions", "RegressionFailed": "dv2s_gym.regress.assertions"}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _EXPORTS:
-        return getattr(import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class _BackendChoices:
