@@ -1,11 +1,11 @@
 """The offline backends' figures on the two whole evaluation sets, checked against targets and measured figures.
 
     python -m bench.bench_evalset                    # both sets, DRA and end to end
-    python -m bench.bench_evalset --set external     # only dv2s_gym/evalset_highway_env
+    python -m bench.bench_evalset --set external     # only bench/evalsets/highway_env
     python -m bench.bench_evalset --stage dra        # only the DRA figures
 
 Sets: ``in-house`` is ``dv2s_gym/evalset`` (96 clips: 3 of each of the 32 bank scenarios in DV2S-v0), ``external``
-is ``dv2s_gym/evalset_highway_env`` (66 clips rendered by stock highway-env). Backends: the bev DRA and the rules
+is ``bench/evalsets/highway_env`` (66 clips rendered by stock highway-env). Backends: the bev DRA and the rules
 SG. Checks (the in-house ones are targets: the paper's figures to beat; the external ones are floors at a
 measured value less ``MARGIN``, ceilings at one plus it):
 
@@ -13,7 +13,7 @@ measured value less ``MARGIN``, ceilings at one plus it):
 * in-house end to end: every clip converted, E2E-SC >= 0.90 overall, >= 0.80 per use case except exactly the
   use cases in ``KNOWN_E2E_MISSES`` (each still >= 0.70), no generated script with a failure;
 * external DRA and end to end: the overall and per-use-case figures of ``EXTERNAL_DRA_MEASURED`` /
-  ``EXTERNAL_E2E_MEASURED`` (``dv2s_gym/evalset_highway_env/README.md`` states them).
+  ``EXTERNAL_E2E_MEASURED`` (``bench/evalsets/highway_env/README.md`` states them).
 
 Measured on 2026-11-27 (2 cores shared with other jobs, no GPU; in-house set 6 min 54 s wall): the in-house SCS
 (0.860), its E2E-SC (0.879) and the >= 0.70 floor of three known misses (the two cyclist use cases, the car passing behind

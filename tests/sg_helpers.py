@@ -1,6 +1,6 @@
 """Helpers of the rules-SG composition tests: generate from a hand-built parse, run a script."""
 
-from dv2s_gym.pipeline.semantics.text import ParsedDescription
+from dv2s_gym.pipeline.semantics.parsed import ParsedDescription
 from dv2s_gym.pipeline.sg.rules import generate as sg_generate
 
 

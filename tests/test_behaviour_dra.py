@@ -1,7 +1,7 @@
 """The bird's-eye Driving Record Analyzer's behaviour, recorded: what it says of every shipped evaluation clip.
 
 For the seed-0 clip of every in-house evaluation use case (``dv2s_gym/evalset``) and every clip of the stock
-highway-env set (``dv2s_gym/evalset_highway_env``), ``tests/data/behaviour/dra.json`` holds the SHA-256 digests of
+highway-env set (``bench/evalsets/highway_env``, the data its benchmark reads; read here, not imported), ``tests/data/behaviour/dra.json`` holds the SHA-256 digests of
 the ``bev`` backend's description and of its semantic elements. Only what the analyzer hands on is recorded (its
 tracks' floating-point measurements are not: they are intermediate, and their last bits may differ between CPUs).
 A refactor must leave them as they are; a change meant to be one is recorded by writing them again:
@@ -28,8 +28,8 @@ RECORD = ROOT / "tests" / "data" / "behaviour" / "dra.json"
 
 
 def _clips():
-    package = ROOT / "dv2s_gym"
-    return sorted(package.glob("evalset/*_seed0.webm")) + sorted(package.glob("evalset_highway_env/*.webm"))
+    return sorted((ROOT / "dv2s_gym").glob("evalset/*_seed0.webm")) + \
+        sorted((ROOT / "bench" / "evalsets").glob("highway_env/*.webm"))
 
 
 def behaviour() -> Dict[str, Dict[str, str]]:

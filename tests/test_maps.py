@@ -29,6 +29,8 @@ from scenario_bank.maps import (  # noqa: E402
     resolve_map,
 )
 from scenario_bank.maps import build_maps  # noqa: E402
+from scenario_bank.maps.dimensions import ROUNDABOUT_ARM_START, ROUNDABOUT_RING_RADIUS  # noqa: E402
+from scenario_bank.maps.opendrive_model import format_float  # noqa: E402
 
 import scenic  # a core dependency: a broken install fails here
 from scenic.domains.driving.roads import ManeuverType, Network  # noqa: E402
@@ -128,7 +130,7 @@ def test_xodr_header_and_no_timestamp(name):
 
 
 def test_format_float_is_stable():
-    f = build_maps.format_float
+    f = format_float
     assert f(0.0) == f(-0.0) == f(1e-12) == f(-1e-12) == "0"
     assert f(2000.0) == "2000"
     assert f(-10.5) == "-10.5"
@@ -342,7 +344,7 @@ def test_urban_roundabout(network):
     types = [m.type for m in junction.maneuvers]
     for kind in (ManeuverType.LEFT_TURN, ManeuverType.STRAIGHT, ManeuverType.RIGHT_TURN):
         assert types.count(kind) == 4
-    ring_radius = build_maps.ROUNDABOUT_RING_RADIUS
+    ring_radius = ROUNDABOUT_RING_RADIUS
     for maneuver in junction.maneuvers:
         kind = maneuver.connectingLane.road.name  # <from>_to_<to>_<first|second|third>_exit_<kind>
         points = np.array([(p[0], p[1]) for p in maneuver.connectingLane.centerline])
@@ -354,7 +356,7 @@ def test_urban_roundabout(network):
         assert np.all(np.diff(angles) > -0.01), kind  # (Scenic leaves cm-long seams between geometries)
         exits = {"right": 1, "straight": 2, "left": 3}[kind.rsplit("_", 1)[1]]
         # from the inbound lane of one arm to the outbound lane of the next, 1.75 m off each arm's axis
-        offset = 2 * np.arctan2(LANE_WIDTH / 2, build_maps.ROUNDABOUT_ARM_START)
+        offset = 2 * np.arctan2(LANE_WIDTH / 2, ROUNDABOUT_ARM_START)
         assert angles[-1] - angles[0] == pytest.approx(exits * np.pi / 2 - offset, abs=0.02), kind
     # a circulating path shares the ring with the entry of every arm it passes (Scenic's conflictingManeuvers
     # counts centre lines that cross, which paths merging into the same ring do not always do)

@@ -153,3 +153,17 @@ def test_the_arguments_of_a_check_are_the_regression_settings():
         regression_arguments("rule", "rule", episode=3)
     with pytest.raises(pytest.UsageError, match="give baseline="):
         regression_arguments("rule", episodes=3)
+
+
+def test_the_plugin_module_loads_nothing_beyond_its_package():
+    """pytest imports the plugin in every session: it adds no module of the project (nor Gymnasium's
+    submodules) to what importing its package loads; the runner loads when a test uses the plugin."""
+    import subprocess
+    import sys
+
+    code = ("import sys, pytest, dv2s_gym.regress; before = set(sys.modules); "
+            "import dv2s_gym.regress.pytest_plugin; "
+            "print(sorted(set(sys.modules) - before))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)}).stdout.strip()
+    assert out == "['dv2s_gym.regress.pytest_plugin']"

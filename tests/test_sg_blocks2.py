@@ -5,7 +5,7 @@ Parses are built per the parser contract so these tests do not depend on how tod
 
 import pytest
 
-from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription
+from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
 from scenario_bank.safety import check_script
 from sg_helpers import generate_from, trace_actions
 

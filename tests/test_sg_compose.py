@@ -7,7 +7,7 @@ depend on how today's parser reads a phrase."""
 import pytest
 
 from dv2s_gym.pipeline.errors import GenerationError
-from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription
+from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
 from envs.errors import DV2SError
 from scenario_bank.safety import check_script
 from sg_helpers import generate_from, run_script, trace_actions

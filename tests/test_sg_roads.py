@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from dv2s_gym.pipeline.sg import rules as sg_rules
-from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription
+from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
 from scenario_bank.safety import check_script
 from sg_helpers import generate_from, run_script
 

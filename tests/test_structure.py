@@ -925,7 +925,7 @@ def test_the_parts_of_dv2s_gym_import_one_way():
         return None if pieces[0] != "dv2s_gym" else pieces[1] if len(pieces) > 1 else "__init__"
 
     graph = import_graph()
-    parts = {part(m) for m in graph} - {None, "evalset", "evalset_highway_env"}  # the evaluation sets are data
+    parts = {part(m) for m in graph} - {None, "evalset"}  # the evaluation set is data
     assert parts == set(SUBSYSTEMS), f"a part of dv2s_gym/ without a place in SUBSYSTEMS: {parts ^ set(SUBSYSTEMS)}"
     rank = {name: i for i, name in enumerate(SUBSYSTEMS)}
     wrong = sorted(f"{m} imports {t}" for m, ts in graph.items() if part(m) in rank for t in ts
@@ -2154,17 +2154,32 @@ print("\\nMODULES " + " ".join(sorted(sys.modules)))
 
 
 @functools.lru_cache(maxsize=1)
-def startup_modules() -> frozenset:
-    """Every module (project or not) loaded when the entry points start: the command line parsing ``--help``
-    (which builds every command's parser), and the pytest plugin being loaded."""
+def startup_modules_by_entry_point() -> Dict[str, frozenset]:
+    """Entry point -> every module (project or not) loaded when it starts, each in a fresh interpreter: the command
+    line parsing ``--help`` (which builds every command's parser), the pytest plugin being loaded."""
     import os
     import subprocess
     import sys
 
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    run = subprocess.run([sys.executable, "-c", _STARTUP, *_entry_points()], cwd=ROOT, env=env,
-                         capture_output=True, text=True, timeout=120, check=True)
-    return frozenset(run.stdout.rpartition("\nMODULES ")[2].split())
+    loaded = {}
+    for point in _entry_points():
+        run = subprocess.run([sys.executable, "-c", _STARTUP, point], cwd=ROOT, env=env,
+                             capture_output=True, text=True, timeout=120, check=True)
+        loaded[point] = frozenset(run.stdout.rpartition("\nMODULES ")[2].split())
+    return loaded
+
+
+def startup_modules() -> frozenset:
+    """Every module loaded when any entry point starts (:func:`startup_modules_by_entry_point`)."""
+    return frozenset().union(*startup_modules_by_entry_point().values())
+
+
+def startup_with(module: str, startup: frozenset) -> frozenset:
+    """What start-up loads anyway where ``module`` is loaded: the modules of the entry points that load it (the
+    pytest plugin starts without the command line, and the other way round); ``startup`` when none does."""
+    starts = [loaded for loaded in startup_modules_by_entry_point().values() if module in loaded]
+    return frozenset().union(*starts) if starts else startup
 
 
 def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: frozenset) -> List[str]:
@@ -2173,8 +2188,9 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
     One is allowed when what it loads adds a heavy dependency (:data:`HEAVY_DEPENDENCIES`, itself or through a
     project module that imports one when imported: :func:`heavy_dependencies`) that the importing module does not
     load already when imported -- deferring what is loaded anyway saves nothing --, or when the importing module is
-    one of :data:`STARTUP_FRONT`, loaded at start-up (:func:`startup_modules`), and what it loads is not (deferring
-    it keeps start-up short), or in the parts :data:`LAZY_BY_DESIGN`; :data:`STILL_TO_CLEAN` is not checked yet.
+    one of :data:`STARTUP_FRONT`, loaded at start-up (:func:`startup_modules`), and what it loads is not loaded by
+    the entry points that load it (:func:`startup_with`; deferring it keeps start-up short), or in the parts
+    :data:`LAZY_BY_DESIGN`; :data:`STILL_TO_CLEAN` is not checked yet.
     ``heavy`` (:func:`heavy_modules`) names the modules that load a heavy dependency at all.
     """
     loads = heavy_dependencies(modules)
@@ -2183,6 +2199,7 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
         if any(module == part or module.startswith(part + ".") for part in STILL_TO_CLEAN + LAZY_BY_DESIGN):
             continue
         front = module in startup and any(module == part or module.startswith(part + ".") for part in STARTUP_FRONT)
+        loaded_with = startup_with(module, startup) if front else startup
         tree = _parsed(path)
         for node, line, shown in function_level_imports(tree):
             names = _imported_names(node, module, path)
@@ -2193,7 +2210,7 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
                 resolved = _resolve(name, modules)
                 top = name.split(".")[0]
                 added = ({top} & HEAVY_DEPENDENCIES) | (loads[resolved] if resolved in heavy else frozenset())
-                deferred = front and (resolved or top) not in startup
+                deferred = front and (resolved or top) not in loaded_with
                 if not (added - loads[module]) and not deferred:
                     light.append(name)
             if light:
@@ -2384,8 +2401,8 @@ def test_the_readme_pictures_the_layout():
     assert top[:4] == [f"{package}/" for package in PACKAGES], "the four layers, bottom first"
     assert {"bench/", "scripts/", "tests/", "docs/"} <= set(top)
     parts = [name.rstrip("/").removesuffix(".py") for name in children["dv2s_gym/"]]
-    assert parts == list(SUBSYSTEMS) + ["evalset", "evalset_highway_env"], \
-        f"dv2s_gym's parts in the picture, against SUBSYSTEMS and the two evaluation sets: {parts}"
+    assert parts == list(SUBSYSTEMS) + ["evalset"], \
+        f"dv2s_gym's parts in the picture, against SUBSYSTEMS and the evaluation set: {parts}"
     on_disk = {path.name for path in (ROOT / "dv2s_gym").iterdir()
                if path.suffix == ".py" or (path.is_dir() and (path / "__init__.py").exists())} - {"__main__.py"}
     assert on_disk <= set(children["dv2s_gym/"]) | {name.rstrip("/") for name in children["dv2s_gym/"]}
@@ -2669,7 +2686,7 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                               "it is a programming fault, Python's convention",
     "policies.registry:Policy.act:NotImplementedError": "an abstract method (Python's convention)",
     "policies.state_driver:StateDriver.act:NotImplementedError": "an abstract method (Python's convention)",
-    "dv2s_gym.pipeline.semantics.text:ParsedDescription.index:ValueError": "list.index's contract: ValueError when "
+    "dv2s_gym.pipeline.semantics.parsed:ParsedDescription.index:ValueError": "list.index's contract: ValueError when "
                                                                            "the item is not there",
     "dv2s_gym.mining.jsonl:JsonlAppender.append:OSError": "the operating system's error raised again with the "
                                                           "file's path (errno kept); the command line reports an "
@@ -2681,11 +2698,11 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                                 "errors and raises ZygoteError",
     "envs.jail_worker:serve:ValueError": "inside the jailed worker: the error is the answer sent to the parent "
                                          "(JailRemoteError there), never raised in the user's process",
-    "scenario_bank.maps.build_maps:format_float:ValueError": "the map builder's self-check on the geometry it "
+    "scenario_bank.maps.opendrive_model:format_float:ValueError": "the map builder's self-check on the geometry it "
                                                              "computes from its own tables (no user input)",
-    "scenario_bank.maps.build_maps:assert_poses_meet:AssertionError": "the map builder's self-check on its own "
+    "scenario_bank.maps.opendrive_model:assert_poses_meet:AssertionError": "the map builder's self-check on its own "
                                                                       "geometry (no user input)",
-    "scenario_bank.maps.build_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
+    "scenario_bank.maps.urban_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
                                                               "tables (no user input)",
     "dv2s_gym.mining.scenic_values:Quantity.over:AssertionError": "an invariant, not an input check: the image was "
                                                                   "read when the Quantity was made (type narrowing)",
@@ -2724,9 +2741,9 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                                   "user's side in its reply (ZygoteError there)",
     "scenario_bank.jail.zygote_server:_handshake:OSError": "inside the jail's zygote: the errno goes to the user's "
                                                            "side in its reply (ZygoteError there)",
-    "scenario_bank.maps.build_maps:_check_map:AssertionError": "the map builder's self-check on the maps it builds "
+    "scenario_bank.maps.opendrive_xml:_check_map:AssertionError": "the map builder's self-check on the maps it builds "
                                                                "from its own tables (no user input)",
-    "scenario_bank.maps.build_maps:_check_section:AssertionError": "the map builder's self-check on the lanes it "
+    "scenario_bank.maps.opendrive_xml:_check_section:AssertionError": "the map builder's self-check on the lanes it "
                                                                    "builds from its own tables (no user input)",
 }
 """``module:Qualified.function:Exception`` -> why a product function (public or private) raises a bare built-in

@@ -35,7 +35,7 @@ Command line::
     python -m bench.evalsets.make_external_evalset OUT_DIR [--only NAME ...]
 
 writes ``OUT_DIR/<script>_v<k>.webm`` and ``<script>_v<k>.label.json`` (the format ``dv2s eval``
-reads). The shipped set lives in ``dv2s_gym/evalset_highway_env/`` (:data:`EXTERNAL_EVALSET_DIR`), whose
+reads). The set lives in ``bench/evalsets/highway_env/`` (:data:`EXTERNAL_EVALSET_DIR`), whose
 README (written by hand) lists the scripts and the measured results.
 Deterministic: fixed seeds, fixed variants; no randomness beyond highway-env's seeded reset.
 """
@@ -50,7 +50,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
-from dv2s_gym.pipeline.evaluate import EVALSET_DIR
 
 # highway-env's viewer draws nothing under SDL's "dummy" driver: render offscreen.
 if os.environ.get("SDL_VIDEODRIVER", "dummy") == "dummy":
@@ -59,7 +58,7 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
 __all__ = ["EXTERNAL_EVALSET_DIR", "SCRIPTS", "Script", "Scene", "render_script", "build", "main"]
 
-EXTERNAL_EVALSET_DIR = EVALSET_DIR.parent / "evalset_highway_env"
+EXTERNAL_EVALSET_DIR = Path(__file__).resolve().parent / "highway_env"
 """The shipped external evaluation set (stock highway-env clips, labelled by hand)."""
 
 FPS = 5

@@ -1,5 +1,5 @@
 """The builder of the external evaluation set (bench/evalsets/make_external_evalset.py): every shipped clip
-(dv2s_gym/evalset_highway_env) has the hand-written label of the builder's script table and is what the builder
+(bench/evalsets/highway_env) has the hand-written label of the builder's script table and is what the builder
 renders, the set holds other scalings, screens and stock traffic, and the builder refuses a script whose event
 does not happen."""
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from dv2s_gym.cli.backend_options import dra_option, sg_option
+from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import llm_config
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import llm_options
@@ -18,7 +19,12 @@ def add_parser(subparsers) -> None:
                               description="Evaluate a stage over a folder of videos/descriptions with <name>.label.json "
                               "files; prints mean ± sd per use case and overall.")
     p.add_argument("stage", choices=["dra", "sg", "e2e"])
-    p.add_argument("folder", nargs="?", default=None, help="labeled folder (default: the shipped evaluation set)")
+    p.add_argument("folder", nargs="?", default=None,
+                   help="labeled folder (default: the shipped in-house set, as --set in-house)")
+    p.add_argument("--set", dest="evalset", default=None, metavar="NAME",
+                   choices=["in-house", "in-house-descriptions"],
+                   help="a shipped evaluation set instead of a folder: in-house (bird's-eye clips of the bank's "
+                        "scenarios) or in-house-descriptions (descriptions written by hand from public sources)")
     dra_option(p)
     sg_option(p)
     p.add_argument("--jobs", type=int, default=1)
@@ -30,11 +36,12 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate the stage and print its table (or JSON)."""
-    from dv2s_gym.pipeline.evaluate import evaluate, format_results
+    from dv2s_gym.pipeline.evaluate import evalset_folder, evaluate, format_results
 
-    from dv2s_gym.pipeline.evaluate import EVALSET_DIR
-
-    report = evaluate(args.stage, args.folder or EVALSET_DIR, dra=args.dra, sg=args.sg, llm_config=llm_config(args),
+    if args.folder is not None and args.evalset is not None:
+        raise UsageError(f"give a labeled folder or --set {args.evalset}, not both")
+    folder = args.folder if args.folder is not None else evalset_folder(args.evalset or "in-house")
+    report = evaluate(args.stage, folder, dra=args.dra, sg=args.sg, llm_config=llm_config(args),
                       jobs=args.jobs, seconds=args.seconds, progress=not args.json)
     emit(args, report, format_results(report))
     return 0

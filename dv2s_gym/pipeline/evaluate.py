@@ -36,11 +36,22 @@ from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.stages import describe, generate
 from scenario_bank.errors import MissingFileError, SettingError
 
-__all__ = ["EvalItem", "EVALSET_DIR", "collect_items", "evaluate", "format_results", "VIDEO_SUFFIXES"]
+__all__ = ["EvalItem", "EVALSET_DIR", "EVALSETS", "evalset_folder", "collect_items", "evaluate", "format_results", "VIDEO_SUFFIXES"]
 
 VIDEO_SUFFIXES = (".mp4", ".webm", ".avi", ".mkv", ".gif")
 EVALSET_DIR = Path(__file__).resolve().parents[1] / "evalset"
 """The labeled evaluation set shipped with dv2s-gym (bird's-eye clips of every bank use case)."""
+EVALSETS = {"in-house": EVALSET_DIR, "in-house-descriptions": EVALSET_DIR / "descriptions"}
+"""The evaluation sets shipped with dv2s-gym by name (``dv2s eval STAGE --set NAME``): the in-house clips and the
+descriptions written by hand from public sources."""
+
+
+def evalset_folder(name: str) -> Path:
+    """The folder of the shipped evaluation set called ``name`` (one of :data:`EVALSETS`)."""
+    if name not in EVALSETS:
+        raise SettingError(f"unknown evaluation set {name!r}; the shipped sets are {', '.join(EVALSETS)} "
+                           "(or pass a labeled folder)")
+    return EVALSETS[name]
 
 
 @dataclass
@@ -77,8 +88,8 @@ def collect_items(folder: str | Path, *, unlabeled_descriptions: bool = False) -
     folder = Path(folder)
     if not folder.is_dir():
         raise MissingFileError(f"evaluation folder {str(folder)!r} does not exist; pass a folder of videos or "
-                               f"descriptions (.txt) each with its label file (<name>{LABEL_SUFFIX}), as "
-                               "dv2s_gym/evalset is")
+                               f"descriptions (.txt) each with its label file (<name>{LABEL_SUFFIX}), or name a "
+                               f"shipped set with --set ({', '.join(EVALSETS)})")
     items = []
     for label_path in sorted(folder.glob(f"*{LABEL_SUFFIX}")):
         stem = label_path.name[: -len(LABEL_SUFFIX)]

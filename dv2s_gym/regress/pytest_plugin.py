@@ -36,20 +36,41 @@ import inspect
 import re
 import shutil
 from pathlib import Path
-from typing import Any, Callable, Dict, Optional
+from typing import TYPE_CHECKING, Any, Callable, Dict, Iterator, Optional
 
 import pytest
 
-from dv2s_gym.regress.assertions import RegressionFailed, RegressionReport
-from dv2s_gym.workers.backends import backend_choices
-from dv2s_gym.regress.errors import RegressError
-from scenario_bank.errors import WrongTypeError
+from scenario_bank.errors import WrongTypeError  # loaded with the package anyway (its env registration)
 
-__all__ = ["RegressionReport", "RegressionFailed", "MARKER"]
+if TYPE_CHECKING:
+    from dv2s_gym.regress.assertions import RegressionReport
+
+# pytest loads this module in every session of an environment with dv2s-gym installed, so it adds nothing to what
+# its package loads: the regression runner, its errors and the worker backends load when a test uses the plugin.
+__all__ = ["MARKER", "regression_arguments"]
 
 MARKER = "dv2s_regression"
-_REPORT = pytest.StashKey[RegressionReport]()
+_REPORT = pytest.StashKey["RegressionReport"]()
 _ALLOW = pytest.StashKey[bool]()
+
+
+class _BackendChoices:
+    """The ``--dv2s-backend`` choices, read from :mod:`dv2s_gym.workers.backends` only when pytest checks a
+    given value or prints its help."""
+
+    def _names(self):
+        from dv2s_gym.workers.backends import backend_choices
+
+        return backend_choices()
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._names()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names())
+
+    def __len__(self) -> int:
+        return len(self._names())
 
 
 _SETTINGS = ("scenarios", "episodes", "seed", "margin", "alpha", "mde", "power", "sequential", "env_config",
@@ -82,7 +103,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                     help="worker processes per regression (default: every core)")
     group.addoption("--dv2s-report-dir", default=None, metavar="DIR",
                     help="write each test's regression report to DIR/<test>/ (default: pytest's temporary folder)")
-    group.addoption("--dv2s-backend", choices=backend_choices(), default="local",
+    group.addoption("--dv2s-backend", choices=_BackendChoices(), default="local",
                     help="where regression episodes run (default: local processes)")
     group.addoption("--dv2s-address", default=None, metavar="HOST:PORT",
                     help="with --dv2s-backend ray: the Ray cluster's address")
@@ -115,6 +136,8 @@ def _out_dir(request: pytest.FixtureRequest, factory: pytest.TempPathFactory, su
 
 
 def _run(request: pytest.FixtureRequest, out: Path, arguments: Dict[str, Any]) -> RegressionReport:
+    from dv2s_gym.regress.assertions import RegressionReport
+    from dv2s_gym.regress.errors import RegressError
     from dv2s_gym.regress.runner import BaselineReport, RegressSettings, WorkerSettings, run_regression
 
     config = request.config

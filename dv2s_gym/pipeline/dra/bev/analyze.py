@@ -362,7 +362,7 @@ def analyze_bev(clip, question: Optional[str] = None) -> BevAnalysis:
     # lane lines: their spacing at highway-env's 4 m lane width, a sharper ruler than the codec-blurred
     # bodies (within 2 % on the stock clips, where the bodies read 11-24 % high). Reported, not used: the
     # DRA's distance, speed and braking thresholds were set on the body scale (switching changes in-house
-    # results; see evalset_highway_env/README.md)
+    # results; see bench/evalsets/highway_env/README.md)
     lane_scale = lane_width_scale(out, scale)
     if lane_scale is not None:
         scale_est.lane_px = lane_scale * LANE_RULER_M

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from dv2s_gym.pipeline.errors import GenerationError
-from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription
+from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
 from dv2s_gym.pipeline.sg.rules.describe import COLLISION_HINTS
 from dv2s_gym.pipeline.sg.rules.roads import MAP_ROADS
 from dv2s_gym.pipeline.sg.rules.script import Script

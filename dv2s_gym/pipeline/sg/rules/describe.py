@@ -5,7 +5,8 @@ from __future__ import annotations
 import re
 from typing import Any, Dict, List, Optional, Sequence
 
-from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription, parse_description
+from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
+from dv2s_gym.pipeline.semantics.text import parse_description
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.map_choice import choose_map
 from dv2s_gym.pipeline.sg.rules.roads import PARKING_STREET

@@ -1,18 +1,17 @@
-"""The external evaluation set (dv2s_gym/evalset_highway_env): stock highway-env clips, scripted and labelled by hand.
+"""The external evaluation set (bench/evalsets/highway_env): stock highway-env clips, scripted and labelled by hand.
 
 The offline backends, run on one clip of each use case, describe and convert every clip with the figures
 measured on that subset (floors a little below). The whole set's figures, which
-dv2s_gym/evalset_highway_env/README.md states, are checked by ``python -m bench.bench_evalset --set external``;
-the set's builder and its labels by bench/tests/test_external_evalset_builder.py.
+bench/evalsets/highway_env/README.md states, are checked by ``python -m bench.bench_evalset --set external``;
+the set's builder and its labels by test_external_evalset_builder.py.
 """
 
 import pytest
 
-from dv2s_gym.pipeline.evaluate import EVALSET_DIR, collect_items, evaluate
+from bench.evalsets.make_external_evalset import EXTERNAL_EVALSET_DIR
+from dv2s_gym.pipeline.evaluate import collect_items, evaluate
 
 from evalset_helpers import one_clip_per_use_case
-
-EXTERNAL_EVALSET_DIR = EVALSET_DIR.parent / "evalset_highway_env"
 
 pytestmark = pytest.mark.usefixtures("in_process_simulator")
 
