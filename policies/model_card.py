@@ -32,11 +32,11 @@ import multiprocessing
 import signal
 import time
 
-from scipy.stats import binomtest
 from tqdm import tqdm
 
 from envs.errors import DV2SError
 from policies.evaluation import EpisodeResult, evaluate
+from policies.stats import mcnemar_p, wilson_interval
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.catalog import open_bank
 
@@ -90,29 +90,9 @@ def bank_version(names: Sequence[str], bank_dir: Optional[Union[str, os.PathLike
 
 
 # --------------------------------------------------------------------------- rates
-# The statistics are scipy's: ``policies`` sits below ``dv2s_gym`` in the layering
-# (tests/test_structure.py), so it cannot import ``dv2s_gym.regress.stats``; scipy's Wilson
-# interval and binomial test are the same computations (tests/test_shipped_policy.py checks
-# the card's numbers against that module).
-def _wilson(k: int, n: int, confidence: float) -> Tuple[float, float]:
-    if n == 0:
-        return 0.0, 1.0
-    interval = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
-    return float(interval.low), float(interval.high)
-
-
-def _mcnemar(candidate_only: int, baseline_only: int, alternative: str) -> float:
-    """Exact McNemar p-value: the candidate's share of the discordant pairs against Binomial(m, 1/2);
-    ``alternative="less"``: the candidate has the event less often; ``"greater"``: more often."""
-    discordant = candidate_only + baseline_only
-    if discordant == 0:
-        return 1.0
-    return float(min(1.0, binomtest(candidate_only, discordant, 0.5, alternative=alternative).pvalue))
-
-
 def rate(k: int, n: int, confidence: float = 0.95) -> Dict[str, Any]:
     """``{"k", "n", "rate", "lo", "hi"}``: ``k`` events in ``n`` episodes with a Wilson interval."""
-    lo, hi = _wilson(int(k), int(n), confidence)
+    lo, hi = wilson_interval(int(k), int(n), confidence)
     return {"k": int(k), "n": int(n), "rate": (k / n) if n else 0.0, "lo": float(lo), "hi": float(hi)}
 
 
@@ -187,10 +167,10 @@ def compare_paired(candidate_codes: str, baseline_codes: str, measure: str = "co
         "baseline_rate": sum(baseline) / n if n else 0.0,
         "table": {"both": both, "candidate_only": candidate_only, "baseline_only": baseline_only,
                   "neither": n - both - candidate_only - baseline_only},
-        "p_two_sided": _mcnemar(candidate_only, baseline_only, "two-sided"),
+        "p_two_sided": mcnemar_p(candidate_only, baseline_only, "two-sided"),
         # better: fewer collisions / off-road / failures, or more successes
-        "p_candidate_better": _mcnemar(candidate_only, baseline_only, "less" if lower_better else "greater"),
-        "p_candidate_worse": _mcnemar(candidate_only, baseline_only, "greater" if lower_better else "less"),
+        "p_candidate_better": mcnemar_p(candidate_only, baseline_only, "less" if lower_better else "greater"),
+        "p_candidate_worse": mcnemar_p(candidate_only, baseline_only, "greater" if lower_better else "less"),
     }
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from dv2s_gym.regress.stats import PairedTable, mcnemar_exact, wilson_interval
+from dv2s_gym.regress.stats import PairedTable, mcnemar_exact
 from policies.model_card import (
     MEASURES,
     bank_version,
@@ -17,6 +17,7 @@ from policies.model_card import (
     render_markdown,
 )
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
+from policies.stats import wilson_interval
 from policies.training import EVAL_SEED_BASE, TRAIN_SEED_LOW
 from scenario_bank.bank import Bank
 
