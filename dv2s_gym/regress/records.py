@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
+from policies.card_record import ModelCard
 from scenario_bank.records import JsonRecord, RecordError, RegressEpisode
 
 __all__ = ["RegressReport", "BankInfo", "ReportSettings", "PolicyInfo", "PairedEpisode", "Summary",
@@ -112,13 +113,14 @@ class PolicyInfo(ReportRecord):
     report: Optional[str] = None
     role: Optional[str] = None
     spec: Optional[str] = None
-    card: Optional[Mapping[str, Any]] = None
+    card: Optional[ModelCard] = None
     warning: Optional[str] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
     _KINDS: ClassVar[Dict[str, str]] = {"report": "str", "role": "str", "spec": "str", "card": "object",
                                         "warning": "str"}
+    _NESTED: ClassVar[Dict[str, type]] = {"card": ModelCard}
     _WHAT: ClassVar[str] = "report policy"
 
     def default_null_fields(self) -> FrozenSet[str]:

@@ -57,6 +57,7 @@ from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.records import RecordError, RegressEpisode
 from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, RegressReport, SequentialOutcome
+from policies.card_record import ModelCard
 from policies.registry import PolicySpaceError, load_policy
 from scenario_bank.run_identity import setting_defaults
 
@@ -98,7 +99,7 @@ def _policy_info(spec: str, env_config: Optional[Dict[str, Any]] = None) -> Poli
     while policy is not None and card is None:
         card = getattr(policy, "card", None) or None
         policy = getattr(policy, "inner", None)
-    return PolicyInfo(spec=spec, card=card)
+    return PolicyInfo(spec=spec, card=ModelCard.from_dict(card) if card is not None else None)
 
 
 def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], monitor: MonitorSettings) -> None:
