@@ -128,15 +128,26 @@ class PolicyInfo(ReportRecord):
 
 
 def _result(value: Any) -> Any:
-    """A paired episode's side: a :class:`RegressEpisode` (a result of a run: it has the record's required fields),
-    else the JSON object as given (a report other code made from partial results)."""
+    """A paired episode's side as a :class:`RegressEpisode`: a result of a run (it has the record's required
+    fields) checked field by field; one of a report other code made from partial results taken as it is."""
     if isinstance(value, RegressEpisode):
         return value
     if isinstance(value, Mapping) and RegressEpisode.has_required(value):
         return RegressEpisode.from_dict(value)
     if value is not None and not isinstance(value, Mapping):
         raise RecordError(f"a regression result must be a JSON object, not {type(value).__name__}")
-    return value
+    return _partial_result(value) if value is not None else None
+
+
+def _partial_result(value: Mapping[str, Any]) -> RegressEpisode:
+    """The record of a partial result (one without an ``id``, ``role``, ``scenario`` or ``seed``, which every run's
+    result has), its JSON object unchanged: the missing fields stay missing (or ``null``) in
+    :meth:`~RegressEpisode.to_dict`."""
+    placeholders = {key: blank for key, blank in (("id", ""), ("role", ""), ("scenario", ""), ("seed", 0))
+                    if value.get(key) is None}
+    record = RegressEpisode.from_checked({**value, **placeholders})
+    nulls = frozenset(key for key in placeholders if key in value)
+    return record.replace(**{key: None for key in placeholders}, null_fields=(record.null_fields or frozenset()) | nulls)
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,8 +158,8 @@ class PairedEpisode(ReportRecord):
     id: Optional[str] = None
     scenario: Optional[str] = None
     seed: Optional[int] = None
-    candidate: Optional[Mapping[str, Any]] = None
-    baseline: Optional[Mapping[str, Any]] = None
+    candidate: Optional[RegressEpisode] = None
+    baseline: Optional[RegressEpisode] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -163,16 +174,14 @@ class PairedEpisode(ReportRecord):
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
         return {role: _result(data[role]) for role in ("candidate", "baseline") if data.get(role) is not None}
 
-    def result(self, role: str) -> Optional[Mapping[str, Any]]:
+    def result(self, role: str) -> Optional[RegressEpisode]:
         """The ``"candidate"``'s or the ``"baseline"``'s result."""
         return self.candidate if role == "candidate" else self.baseline
 
     def errored(self, role: str) -> bool:
         """Whether ``role`` ran this pair and its episode ended in an error."""
         result = self.result(role)
-        if isinstance(result, RegressEpisode):
-            return bool(result.error)
-        return result is not None and bool(result.get("error"))
+        return result is not None and bool(result.error)
 
     def to_dict(self) -> Dict[str, Any]:
         out = super().to_dict()
