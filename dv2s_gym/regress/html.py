@@ -1,7 +1,8 @@
 """The regression report as one self-contained HTML page.
 
 :func:`write_html` turns a report (a :class:`~dv2s_gym.regress.records.RegressReport`, or the JSON object of
-the ``dv2s-regress`` schema written by the runner, read at the door) into a single file with no external resources: inline CSS, plots drawn as
+the ``dv2s-regress`` schema written by the runner, read at the door) into a single file with no external
+resources: inline CSS, plots drawn as
 inline SVG by the small functions below (per-scenario failure and collision rates
 with their intervals, the paired difference per scenario against the margin,
 distributions of minimum time-to-collision and return), a verdict banner, tables with
@@ -235,7 +236,8 @@ def _settings_table(report: RegressReport) -> str:
             ("baseline", report.baseline.spec if report.baseline is not None else "none")]
     rows += [(key, getattr(settings, key)) for key in ("episodes", "seed", "margin", "alpha", "sequential", "backend",
                                                        "workers") if key in written]
-    rows += [("bank", f"{'' if bank.path is None else bank.path} (version {'?' if bank.version is None else bank.version})"),
+    version = "?" if bank.version is None else bank.version
+    rows += [("bank", f"{'' if bank.path is None else bank.path} (version {version})"),
              ("created", report.created), ("dv2s version", report.dv2s_version)]
     return "<table>" + "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows) + "</table>"
 

@@ -31,7 +31,7 @@ from policies.card_record import ModelCard
 from scenario_bank.records import JsonRecord, RecordError, RegressEpisode
 
 __all__ = ["RegressReport", "BankInfo", "ReportSettings", "PolicyInfo", "PairedEpisode", "Summary",
-           "PairedComparison", "ScenarioResult", "EpisodeError", "SequentialOutcome", "ReportRecord"]
+           "PairedComparison", "ScenarioResult", "EpisodeError", "SequentialOutcome", "ReportRecord", "as_result"]
 
 Interval = Mapping[str, Any]
 """``{"value", "low", "high"}`` (a rate adds ``count``, a mean ``n``); values ``None`` without episodes."""
@@ -127,9 +127,10 @@ class PolicyInfo(ReportRecord):
         return frozenset({"card"})
 
 
-def _result(value: Any) -> Any:
-    """A paired episode's side as a :class:`RegressEpisode`: a result of a run (it has the record's required
-    fields) checked field by field; one of a report other code made from partial results taken as it is."""
+def as_result(value: Any) -> Optional[RegressEpisode]:
+    """A policy's result of one episode as a :class:`RegressEpisode` (``None`` for ``None``): a result of a run (it
+    has the record's required fields) checked field by field; a partial one (a report other code made) taken as
+    it is."""
     if isinstance(value, RegressEpisode):
         return value
     if isinstance(value, Mapping) and RegressEpisode.has_required(value):
@@ -172,7 +173,7 @@ class PairedEpisode(ReportRecord):
 
     @classmethod
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
-        return {role: _result(data[role]) for role in ("candidate", "baseline") if data.get(role) is not None}
+        return {role: as_result(data[role]) for role in ("candidate", "baseline") if data.get(role) is not None}
 
     def result(self, role: str) -> Optional[RegressEpisode]:
         """The ``"candidate"``'s or the ``"baseline"``'s result."""
