@@ -120,7 +120,8 @@ __all__ = [
     "check_baseline_report",
     "write_json",
     "write_markdown",
-    "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings"]
+    "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings",
+    "Report"]
 
 SCHEMA = "dv2s-regress"
 SCHEMA_VERSION = 1
