@@ -49,6 +49,7 @@ from policies.state_driver import SLOWER
 from policies.dagger_config import DAGGER_DEFAULTS, DaggerConfig
 from policies.training import (ScenarioSchedule, TrainConfig, TrainEnvSpec, TrainingError, check_source_observation,
                                close_vec_env, fine_tune_scenarios, make_vec_env, resolve_checkpoint)
+from policies.card_record import FineTuneMethod, ModelCard
 from policies.model_card import write_card
 from policies.registry import load_policy, read_model_card
 from scenario_bank.atomic import atomic_path
@@ -287,7 +288,8 @@ def dagger_fine_tune(checkpoint_or_spec: str, config: TrainConfig, dagger: Optio
             raise TrainingError(f"DAgger {name} must be an integer >= 1, not {value!r}")
 
     model_path = Path(config.out) / "model.zip"
-    if model_path.is_file() and (read_model_card(model_path).get("fine_tune") or {}).get("method") == "dagger":
+    finished = read_model_card(model_path).fine_tune if model_path.is_file() else None
+    if finished is not None and finished.is_dagger:
         return model_path
     run = _DaggerRun(checkpoint_or_spec, config, dagger, log)
     run.restore(run.checkpoint.load())  # refuses a checkpoint of other settings before any work
@@ -311,7 +313,7 @@ class _DaggerRun:
         if algorithm != "ppo":
             raise TrainingError(f"DAgger fine-tunes an actor-critic policy with an action distribution (ppo), not "
                                 f"{algorithm}; use --fine-tune-method ppo")
-        self.env_config = dict(self.source_card.get("env_config") or {}) if config.env_config is None \
+        self.env_config = dict(self.source_card.env_config or {}) if config.env_config is None \
             else config.env_config
         check_source_observation(self.source_card, self.env_config, spec)
         self.checkpoint = DAggerCheckpoint(self.out / CHECKPOINT_DIR, run_identity(
@@ -447,19 +449,19 @@ class _DaggerRun:
         write_card(self.out, card)
         self.checkpoint.remove()
         self.log(f"wrote {model_path} (DAgger, agreement with {self.dagger.reference} on {len(all_labels)} labelled "
-                 f"states: {card['fine_tune']['agreement']['source']:.3f} -> "
-                 f"{card['fine_tune']['agreement']['fine_tuned']:.3f})")
+                 f"states: {card.fine_tune.agreement['source']:.3f} -> "
+                 f"{card.fine_tune.agreement['fine_tuned']:.3f})")
         return model_path
 
-    def _card(self, wall: float, agreements: Dict[str, Any]) -> Dict[str, Any]:
+    def _card(self, wall: float, agreements: Dict[str, Any]) -> ModelCard:
         c, d, steps = self.config, self.dagger, self.config.steps
-        card = json.loads(json.dumps({k: v for k, v in self.source_card.items() if k != "evaluation"}))
+        card = {k: v for k, v in self.source_card.to_dict().items() if k != "evaluation"}
         card["env_config"] = dict(self.env_config)
         card["sampler"] = {"mode": "weighted", "weights": self.probabilities}
-        card["training"] = {**dict(card.get("training") or {}), "command": "dv2s loop --fine-tune-method dagger",
+        card["training"] = {**dict(self.source_card.training or {}), "command": "dv2s loop --fine-tune-method dagger",
                             "steps": int(steps), "n_envs": c.n_envs, "seed": int(c.seed), "wall_time_s": round(wall, 1),
                             "steps_per_s": round(steps / wall, 1) if wall > 0 else None, "segments": []}
-        card["fine_tune"] = {"method": "dagger", "source": str(self.spec), "source_checkpoint": str(self.source),
+        card["fine_tune"] = {"method": FineTuneMethod.DAGGER.value, "source": str(self.spec), "source_checkpoint": str(self.source),
                              "steps": int(steps), "weights": self.probabilities,
                              "learning_rate": float(d.learning_rate), "reference": d.reference,
                              "iterations": d.iterations, "beta": float(d.beta), "beta_decay": float(d.beta_decay),
@@ -470,4 +472,4 @@ class _DaggerRun:
                                f"labelled env steps in {d.iterations} iterations on {len(self.scenarios)} scenarios "
                                "with weighted sampling (see fine_tune).")
         card["name"] = self.out.name
-        return card
+        return ModelCard.from_dict(json.loads(json.dumps(card)))

@@ -32,13 +32,15 @@ import multiprocessing
 import signal
 import time
 
-from scipy.stats import binomtest
 from tqdm import tqdm
 
 from envs.errors import DV2SError
+from policies.card_record import ModelCard
 from policies.evaluation import EpisodeResult, evaluate
+from policies.stats import mcnemar_p, wilson_interval
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.catalog import open_bank
+from scenario_bank.records import RecordError
 
 __all__ = [
     "CARD_NAME",
@@ -90,29 +92,9 @@ def bank_version(names: Sequence[str], bank_dir: Optional[Union[str, os.PathLike
 
 
 # --------------------------------------------------------------------------- rates
-# The statistics are scipy's: ``policies`` sits below ``dv2s_gym`` in the layering
-# (tests/test_structure.py), so it cannot import ``dv2s_gym.regress.stats``; scipy's Wilson
-# interval and binomial test are the same computations (tests/test_shipped_policy.py checks
-# the card's numbers against that module).
-def _wilson(k: int, n: int, confidence: float) -> Tuple[float, float]:
-    if n == 0:
-        return 0.0, 1.0
-    interval = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
-    return float(interval.low), float(interval.high)
-
-
-def _mcnemar(candidate_only: int, baseline_only: int, alternative: str) -> float:
-    """Exact McNemar p-value: the candidate's share of the discordant pairs against Binomial(m, 1/2);
-    ``alternative="less"``: the candidate has the event less often; ``"greater"``: more often."""
-    discordant = candidate_only + baseline_only
-    if discordant == 0:
-        return 1.0
-    return float(min(1.0, binomtest(candidate_only, discordant, 0.5, alternative=alternative).pvalue))
-
-
 def rate(k: int, n: int, confidence: float = 0.95) -> Dict[str, Any]:
     """``{"k", "n", "rate", "lo", "hi"}``: ``k`` events in ``n`` episodes with a Wilson interval."""
-    lo, hi = _wilson(int(k), int(n), confidence)
+    lo, hi = wilson_interval(int(k), int(n), confidence)
     return {"k": int(k), "n": int(n), "rate": (k / n) if n else 0.0, "lo": float(lo), "hi": float(hi)}
 
 
@@ -187,10 +169,10 @@ def compare_paired(candidate_codes: str, baseline_codes: str, measure: str = "co
         "baseline_rate": sum(baseline) / n if n else 0.0,
         "table": {"both": both, "candidate_only": candidate_only, "baseline_only": baseline_only,
                   "neither": n - both - candidate_only - baseline_only},
-        "p_two_sided": _mcnemar(candidate_only, baseline_only, "two-sided"),
+        "p_two_sided": mcnemar_p(candidate_only, baseline_only, "two-sided"),
         # better: fewer collisions / off-road / failures, or more successes
-        "p_candidate_better": _mcnemar(candidate_only, baseline_only, "less" if lower_better else "greater"),
-        "p_candidate_worse": _mcnemar(candidate_only, baseline_only, "greater" if lower_better else "less"),
+        "p_candidate_better": mcnemar_p(candidate_only, baseline_only, "less" if lower_better else "greater"),
+        "p_candidate_worse": mcnemar_p(candidate_only, baseline_only, "greater" if lower_better else "less"),
     }
 
 
@@ -278,17 +260,18 @@ def _card_path(location: Union[str, os.PathLike]) -> Path:
     return (path.parent if path.suffix == ".zip" else path) / CARD_NAME
 
 
-def write_card(directory: Union[str, os.PathLike], card: Mapping[str, Any]) -> Path:
+def write_card(directory: Union[str, os.PathLike], card: ModelCard) -> Path:
     """Write ``card`` as ``model_card.json`` and its rendering as ``README.md`` in
     ``directory`` (both atomic); returns the JSON path."""
     directory = Path(directory)
-    data = json.loads(json.dumps({"card_version": CARD_VERSION, **dict(card)}, default=str, sort_keys=True))
+    data = json.loads(json.dumps({"card_version": CARD_VERSION, **card.to_dict()}, default=str, sort_keys=True))
     path = atomic_write_json(directory / CARD_NAME, data, indent=1)
-    atomic_write_text(directory / README_NAME, render_markdown(data))  # the same text read_card + render gives
+    # the same text read_card + render gives
+    atomic_write_text(directory / README_NAME, render_markdown(ModelCard.from_dict(data)))
     return path
 
 
-def read_card(location: Union[str, os.PathLike]) -> Dict[str, Any]:
+def read_card(location: Union[str, os.PathLike]) -> ModelCard:
     """The card at ``location``: a card file, the folder holding it, or the ``model.zip`` beside it."""
     path = _card_path(location)
     if not path.is_file():
@@ -299,38 +282,42 @@ def read_card(location: Union[str, os.PathLike]) -> Dict[str, Any]:
         raise ModelCardError(f"model card {path} is not readable JSON ({error}); fix it or re-run `dv2s train`") from error
     if not isinstance(card, dict) or "algorithm" not in card:
         raise ModelCardError(f"{path} is not a dv2s-gym model card (no 'algorithm'); re-run `dv2s train`")
-    if int(card.get("card_version", 0)) > CARD_VERSION:
-        raise ModelCardError(f"model card {path} has version {card.get('card_version')}, newer than this "
+    try:
+        record = ModelCard.from_dict(card)
+    except RecordError as error:
+        raise ModelCardError(f"model card {path}: {error}; fix it or re-run `dv2s train`") from error
+    if (record.card_version or 0) > CARD_VERSION:
+        raise ModelCardError(f"model card {path} has version {record.card_version}, newer than this "
                              f"dv2s-gym reads ({CARD_VERSION}); upgrade dv2s-gym")
-    return card
+    return record
 
 
 def _rate_cell(r: Mapping[str, Any]) -> str:
     return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]"
 
 
-def render_markdown(card: Mapping[str, Any]) -> str:
+def render_markdown(card: ModelCard) -> str:
     """A human-readable rendering of a card (the ``README.md`` beside it)."""
-    training = card.get("training", {})
-    lines = [f"# {card.get('name', 'model')} — {str(card.get('algorithm', '')).upper()} on DV2S-v0", ""]
-    if card.get("description"):
-        lines += [card["description"], ""]
+    training = card.training or {}
+    bank = card.bank or {}
+    lines = [f"# {card.name or 'model'} — {str(card.algorithm or '').upper()} on DV2S-v0", ""]
+    if card.description:
+        lines += [card.description, ""]
     lines += [
         "Written by `dv2s train` from `model_card.json` (the data; this file is its rendering).", "",
         "## Training", "",
         f"- command: `{training.get('command', '')}` (its `--out` folder then holds model.zip and this card)",
         f"- steps: {training.get('steps')} ({training.get('n_envs')} subprocess envs), seed {training.get('seed')}",
         f"- wall time: {training.get('wall_time_s', 0):.0f} s ({training.get('steps_per_s', 0):.0f} env steps/s)",
-        f"- scenario sampling: {card.get('sampler', {}).get('mode')}",
-        f"- bank version: `{card.get('bank', {}).get('version', '')}` "
-        f"({len(card.get('bank', {}).get('scenarios', {}))} scenarios)",
-        f"- hyperparameters: `{json.dumps(card.get('hyperparameters', {}), sort_keys=True)}`",
-        f"- env config overrides: `{json.dumps(card.get('env_config', {}), sort_keys=True)}`",
-        f"- spaces: observation {card.get('observation_space')}, action {card.get('action_space')}",
+        f"- scenario sampling: {(card.sampler or {}).get('mode')}",
+        f"- bank version: `{bank.get('version', '')}` ({len(bank.get('scenarios', {}))} scenarios)",
+        f"- hyperparameters: `{json.dumps(dict(card.hyperparameters or {}), sort_keys=True)}`",
+        f"- env config overrides: `{json.dumps(dict(card.env_config or {}), sort_keys=True)}`",
+        f"- spaces: observation {card.observation_space}, action {card.action_space}",
         "",
     ]
-    evaluation = card.get("evaluation")
-    if "evaluation" in card and evaluation is None:
+    evaluation = card.evaluation
+    if card.evaluation_interrupted:
         command = str(training.get("command") or "dv2s train --out FOLDER")
         resume = command if "--resume" in command.split() else f"{command} --resume"
         lines += ["## Evaluation", "",
@@ -364,9 +351,11 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def iter_card_episodes(card: Mapping[str, Any]) -> Iterable[Tuple[str, int]]:
+def iter_card_episodes(card: ModelCard) -> Iterable[Tuple[str, int]]:
     """The ``(scenario, seed)`` episodes a card's evaluation ran, in order."""
-    evaluation = card["evaluation"]
+    evaluation = card.evaluation
+    if evaluation is None:
+        raise ModelCardError(f"model card {card.name!r} has no evaluation; complete it with `dv2s train --resume`")
     base, seeds = int(evaluation["seed_base"]), int(evaluation["seeds_per_scenario"])
     for name in evaluation["scenarios"]:
         for offset in range(seeds):

@@ -44,6 +44,8 @@ from envs.config_check import observation_in_force
 from envs.errors import DV2SError
 from scenario_bank.extras import extra_of, missing_extra_message
 from scenario_bank.named_registry import Registry
+from scenario_bank.records import RecordError
+from policies.card_record import ModelCard
 
 __all__ = [
     "Policy",
@@ -275,10 +277,10 @@ def _sample(space: gym.Space, rng: np.random.Generator):
 class SB3Policy(Policy):
     """A stable-baselines3 model (PPO, DQN, SAC, ...)."""
 
-    def __init__(self, name: str, model: Any, card: Optional[Mapping[str, Any]] = None) -> None:
+    def __init__(self, name: str, model: Any, card: Optional[ModelCard] = None) -> None:
         self.name = name
         self.model = model
-        self.card = dict(card or {})
+        self.card = ModelCard.from_dict(card) if card is not None else ModelCard()
         self.observation_space = model.observation_space
         self.action_space = model.action_space
 
@@ -291,17 +293,17 @@ class SB3Policy(Policy):
         return np.asarray(actions)
 
 
-def check_card_observation(name: str, card: Mapping[str, Any], env_config: Optional[Mapping[str, Any]]) -> None:
+def check_card_observation(name: str, card: ModelCard, env_config: Optional[Mapping[str, Any]]) -> None:
     """Raise :class:`PolicySpaceError` unless ``env_config`` observes as the env the policy ``name`` of model card
     ``card`` was trained in, by the card's ``env_config`` (no ``observation`` there: the default one): same type,
     features and options. A card without an ``env_config`` (a bare checkpoint) is checked by the observation
     space's shape only, elsewhere."""
-    if "env_config" not in card:
+    if card.env_config is None and "env_config" not in (card.null_fields or ()):
         return
     from envs.dv2s_env import DV2SEnv
 
     defaults = DV2SEnv.default_config()
-    trained = observation_in_force(card.get("env_config") or {}, defaults)
+    trained = observation_in_force(card.env_config or {}, defaults)
     given = observation_in_force(env_config or {}, defaults)
     if trained != given:
         differ = sorted(key for key in set(trained) | set(given) if trained.get(key) != given.get(key))
@@ -311,9 +313,9 @@ def check_card_observation(name: str, card: Mapping[str, Any], env_config: Optio
             f"with the env config of its model card (config['observation'] = {trained_section(card)!r})")
 
 
-def trained_section(card: Mapping[str, Any]) -> Dict[str, Any]:
+def trained_section(card: ModelCard) -> Dict[str, Any]:
     """The ``observation`` section a model card's policy was trained with (the default's when it names none)."""
-    section = (card.get("env_config") or {}).get("observation")
+    section = (card.env_config or {}).get("observation")
     if section is None:
         from envs.dv2s_env import DV2SEnv
 
@@ -594,16 +596,21 @@ def _load_object(module_name: str, attribute: str, spec: str, options: Dict[str,
     raise PolicyError(f"policy {spec!r} is a {type(target).__name__}, not a Policy or a callable")
 
 
-def read_model_card(checkpoint: Union[str, os.PathLike]) -> Dict[str, Any]:
-    """The model card (``model_card.json``) beside a checkpoint, or ``{}``."""
+def read_model_card(checkpoint: Union[str, os.PathLike]) -> ModelCard:
+    """The model card (``model_card.json``) beside a checkpoint (a ``model.zip`` or the folder holding one), or the
+    empty card (:attr:`ModelCard.exists` false) when there is none."""
     path = Path(checkpoint)
     card = (path if path.is_dir() else path.parent) / "model_card.json"
     if not card.is_file():
-        return {}
+        return ModelCard()
     try:
-        return json.loads(card.read_text(encoding="utf-8"))
+        data = json.loads(card.read_text(encoding="utf-8"))
     except (OSError, ValueError) as error:
         raise PolicyError(f"model card {card} is not readable JSON ({error}); fix or delete it") from error
+    try:
+        return ModelCard.from_dict(data)
+    except RecordError as error:
+        raise PolicyError(f"model card {card}: {error}; fix or delete it") from error
 
 
 def _load_sb3(path: str, algorithm: Optional[str], name: str, **options: Any) -> Policy:
@@ -613,7 +620,7 @@ def _load_sb3(path: str, algorithm: Optional[str], name: str, **options: Any) ->
     if not checkpoint.is_file():
         raise PolicyError(f"checkpoint {checkpoint} does not exist; train one with `dv2s train` or check the path")
     card = read_model_card(checkpoint)
-    algorithm = (algorithm or card.get("algorithm") or "").lower() or None
+    algorithm = (algorithm or card.algorithm or "").lower() or None
     try:
         import stable_baselines3 as sb3
     except ImportError as error:  # the core install has no rl extra
@@ -630,7 +637,6 @@ def _load_sb3(path: str, algorithm: Optional[str], name: str, **options: Any) ->
         except Exception as error:  # SB3 raises many types on a file of another algorithm or a corrupt zip
             errors.append(f"{candidate}: {type(error).__name__}: {error}")
             continue
-        card.setdefault("algorithm", candidate)
-        return SB3Policy(name, model, card)
+        return SB3Policy(name, model, card.with_algorithm(candidate))
     raise PolicyError(f"checkpoint {checkpoint} does not load as an SB3 model ({'; '.join(errors)[:500]}); "
                       "is it a stable-baselines3 .zip saved by model.save()?")

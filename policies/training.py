@@ -63,7 +63,8 @@ from tqdm import tqdm
 from envs.dv2s_env import DV2SEnv, check_env_config
 from envs.errors import DV2SError, Interrupted
 from policies.evaluation import EVAL_SEED_BASE, make_eval_env, run_episode, TRAIN_SEED_LOW
-from policies.model_card import bank_version, summarize_results, write_card, evaluate_for_card
+from policies.card_record import FineTune, ModelCard
+from policies.model_card import bank_version, read_card, summarize_results, write_card, evaluate_for_card
 from policies.registry import (SB3Policy, load_policy, read_model_card, SHIPPED_CHECKPOINT, parse_spec,
                                PolicySpaceError, check_card_observation)
 from scenario_bank import select_scenarios
@@ -852,7 +853,7 @@ def _versions() -> Dict[str, str]:
     return versions
 
 
-def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] = print) -> Dict[str, Any]:
+def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] = print) -> ModelCard:
     """Train (or resume) a run as described in the module docstring; returns the model card.
 
     Raises :class:`TrainingError` (and the registry's/bank's errors) for bad input.
@@ -925,10 +926,16 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         model.save(tmp)
     card = _card(config, names, env_config, model, sampler, record)
     _evaluate_for_card(config, names, card, model_path, log)
-    write_card(out, card)
+    card_path = write_card(out, _card_record(card))
     log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
         f"{segment['wall_time_s']:.0f} s)")
-    return card
+    return read_card(card_path)
+
+
+def _card_record(card: Mapping[str, Any]) -> ModelCard:
+    """The record of a card this module built as JSON (values JSON does not know written as text, as the file
+    has them)."""
+    return ModelCard.from_dict(json.loads(json.dumps(dict(card), default=str)))
 
 
 def _starting(config: TrainConfig, names: Sequence[str]) -> str:
@@ -1041,7 +1048,7 @@ def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: Dict[str
                                                jobs=config.eval_jobs, progress=config.progress_bar, log=log)
     except KeyboardInterrupt:
         card["evaluation"] = None
-        write_card(Path(config.out), card)
+        write_card(Path(config.out), _card_record(card))
         raise Interrupted(f"stopped during the card's evaluation: {model_path} and "
                           f"{Path(config.out) / 'model_card.json'} are written without it; rerun the same command "
                           "with --resume to evaluate") from None
@@ -1049,11 +1056,11 @@ def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: Dict[str
 
 
 # --------------------------------------------------------------------------- fine-tuning
-def resolve_checkpoint(spec: str) -> Tuple[str, Path, Dict[str, Any]]:
+def resolve_checkpoint(spec: str) -> Tuple[str, Path, ModelCard]:
     """``(algorithm, checkpoint path, model card)`` of an SB3 policy spec.
 
     ``spec`` is ``dv2s-ppo`` (the shipped checkpoint), ``ppo:PATH`` / ``dqn:PATH`` /
-    ``sac:PATH``, a ``model.zip`` or the run folder holding one. The card is ``{}`` when
+    ``sac:PATH``, a ``model.zip`` or the run folder holding one. The card is the empty card when
     none lies beside the checkpoint; the algorithm then comes from loading it.
     """
     base, options = parse_spec(str(spec))
@@ -1073,7 +1080,7 @@ def resolve_checkpoint(spec: str) -> Tuple[str, Path, Dict[str, Any]]:
         raise TrainingError(f"cannot fine-tune {spec!r}: it names no stable-baselines3 checkpoint (model.zip); "
                             "give dv2s-ppo, ppo:PATH or a run folder written by `dv2s train`")
     card = read_model_card(path)
-    algorithm = algorithm or (card.get("algorithm") or "").lower() or None
+    algorithm = algorithm or (card.algorithm or "").lower() or None
     if algorithm is None:
         policy = load_policy(str(path))
         algorithm = type(policy.model).__name__.lower() if isinstance(policy, SB3Policy) else None
@@ -1083,7 +1090,7 @@ def resolve_checkpoint(spec: str) -> Tuple[str, Path, Dict[str, Any]]:
     return algorithm, path.resolve(), card
 
 
-def check_source_observation(source_card: Mapping[str, Any], env_config: Mapping[str, Any], spec: str) -> None:
+def check_source_observation(source_card: ModelCard, env_config: Mapping[str, Any], spec: str) -> None:
     """Refuse to fine-tune a checkpoint in envs that observe otherwise than the ones it was trained in (its card's
     ``env_config``; a card without one is checked by the observation space's shape only)."""
     try:
@@ -1160,14 +1167,14 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, log: Callable[[st
     learning_rate, reward_weights = config.learning_rate, config.reward_weights
     weights, scenarios = fine_tune_scenarios(config.weights, config.scenarios)
     algorithm, source, source_card = resolve_checkpoint(checkpoint_or_spec)
-    env_config = dict(source_card.get("env_config") or {}) if config.env_config is None else config.env_config
+    env_config = dict(source_card.env_config or {}) if config.env_config is None else config.env_config
     env_config = with_reward_weights(env_config, reward_weights)
     check_source_observation(source_card, env_config, checkpoint_or_spec)
-    hyperparameters = {k: v for k, v in (source_card.get("hyperparameters") or {}).items()
+    hyperparameters = {k: v for k, v in (source_card.hyperparameters or {}).items()
                        if k != "policy" and k in _known_hyperparameters(algorithm)}
 
     model_path = out / "model.zip"
-    if model_path.is_file() and "fine_tune" in read_model_card(model_path):
+    if model_path.is_file() and read_model_card(model_path).fine_tune is not None:
         return model_path
 
     start_step = int(getattr(sb3, algorithm.upper()).load(str(source), device="cpu").num_timesteps)
@@ -1180,16 +1187,13 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, log: Callable[[st
     if latest_checkpoint(out) is None:
         _first_checkpoint(run_config, source, start_step, learning_rate)
     card = train(run_config, resume=True, log=log)
-    card["fine_tune"] = {"source": str(checkpoint_or_spec), "source_checkpoint": str(source),
-                         "source_steps": start_step, "steps": int(card["training"]["steps"]) - start_step,
-                         "weights": run_config.weights, "learning_rate": learning_rate,
-                         "reward_weights": dict(reward_weights) if reward_weights else None}
-    card["description"] = (f"Fine-tuned from {checkpoint_or_spec} (step {start_step}) for "
-                           f"{card['fine_tune']['steps']} steps on {len(run_config.scenarios)} scenarios with weighted "
-                           "sampling (see sampler.weights).")
-    card["name"] = out.name
-
-    write_card(out, card)
+    section = FineTune.from_dict(json.loads(json.dumps({
+        "source": str(checkpoint_or_spec), "source_checkpoint": str(source), "source_steps": start_step,
+        "steps": int(card.training["steps"]) - start_step, "weights": run_config.weights,
+        "learning_rate": learning_rate, "reward_weights": dict(reward_weights) if reward_weights else None})))
+    description = (f"Fine-tuned from {checkpoint_or_spec} (step {start_step}) for {section.steps} steps on "
+                   f"{len(run_config.scenarios)} scenarios with weighted sampling (see sampler.weights).")
+    write_card(out, card.replace(fine_tune=section, description=description, name=out.name))
     return model_path
 
 

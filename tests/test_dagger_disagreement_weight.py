@@ -103,7 +103,7 @@ def test_a_killed_run_with_the_disagreement_weight_resumes_to_the_same_model(tmp
 
     run = {**RUN, "disagreement_weight": 4.0}
     whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **run)
-    assert read_card(whole)["fine_tune"]["disagreement_weight"] == 4.0
+    assert read_card(whole).fine_tune.disagreement_weight == 4.0
     plain = dagger_fine_tune("dv2s-ppo", out=tmp_path / "plain", log=lambda _: None, **RUN)
     with pytest.raises(AssertionError):  # the weight changes the training
         _same_model(whole, plain)

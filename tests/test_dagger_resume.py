@@ -23,7 +23,7 @@ from policies.training import ScenarioSchedule
 
 SOURCES = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
 WEIGHTS = {SOURCES[0]: 1.0, SOURCES[1]: 3.0}
-SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT)["env_config"]
+SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT).env_config
 # 2 iterations of 110 steps in each of 2 envs (episodes: 100 steps at most): iteration 1 ends mid-episode, after
 # an episode has ended
 RUN = dict(bank_dir=None, steps=440, weights=WEIGHTS, seed=3, n_envs=2, vec_env="dummy", iterations=2, epochs=2,
@@ -83,8 +83,8 @@ def _same_model(a, b) -> None:
 
 
 def _stats(path):
-    tuned = read_card(path)["fine_tune"]
-    return tuned["history"], tuned["agreement"]
+    tuned = read_card(path).fine_tune
+    return tuned.history, tuned.agreement
 
 
 def _kill_on_train_call(monkeypatch, call: int) -> None:
@@ -103,7 +103,7 @@ def _kill_on_train_call(monkeypatch, call: int) -> None:
 @pytest.mark.slow
 def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_settings(tmp_path, monkeypatch):
     whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **RUN)
-    assert read_card(whole)["fine_tune"]["resumed"] == []
+    assert list(read_card(whole).fine_tune.resumed) == []
     assert not list((tmp_path / "whole").rglob("partial_*"))  # 220-step iterations, a partial every 2000 steps
     assert not (tmp_path / "whole" / CHECKPOINT_DIR).exists()  # removed once the result is written
 
@@ -133,7 +133,7 @@ def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_setting
     assert [line.split(":")[0] for line in lines[1:2]] == ["DAgger iteration 2/2"]  # iteration 1 not redone
     _same_model(whole, resumed)
     assert _stats(resumed) == _stats(whole)
-    assert read_card(resumed)["fine_tune"]["resumed"] == [{"from_iteration": 1, "steps_into_next": 0,
+    assert list(read_card(resumed).fine_tune.resumed) == [{"from_iteration": 1, "steps_into_next": 0,
                                                            "envs_reproduced": True}]
     assert not (out / CHECKPOINT_DIR).exists()
 
@@ -170,7 +170,7 @@ def test_a_run_killed_while_collecting_resumes_from_its_last_partial_commit(tmp_
                                f"{position[0] + 1})")
     _same_model(whole, resumed)
     assert _stats(resumed) == _stats(whole)
-    assert read_card(resumed)["fine_tune"]["resumed"] == [{"from_iteration": position[0], "steps_into_next": 120,
+    assert list(read_card(resumed).fine_tune.resumed) == [{"from_iteration": position[0], "steps_into_next": 120,
                                                            "envs_reproduced": True}]
 
 
@@ -196,7 +196,7 @@ def test_a_run_killed_after_its_last_iteration_only_writes_the_result(tmp_path, 
     resumed = dagger_fine_tune("dv2s-ppo", out=tmp_path / "late", log=lambda _: None, **run)
     _same_model(whole, resumed)
     assert _stats(resumed) == _stats(whole)
-    assert read_card(resumed)["fine_tune"]["resumed"] == []  # no env was restored
+    assert list(read_card(resumed).fine_tune.resumed) == []  # no env was restored
 
 
 def test_an_unreadable_checkpoint_is_refused_with_the_fix(tmp_path):
@@ -270,6 +270,6 @@ def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkey
     tuned = report.rounds[0]["steps"]["fine_tune"]
     # subprocess envs put back where they were too
     assert tuned["resumed"] == [{"from_iteration": 1, "steps_into_next": 0, "envs_reproduced": True}]
-    assert [h["iteration"] for h in read_card(tuned["model"])["fine_tune"]["history"]] == [1, 2, 3, 4]
+    assert [h["iteration"] for h in read_card(tuned["model"]).fine_tune.history] == [1, 2, 3, 4]
     assert "resumed from iteration 1:" in report.paths["md"].read_text()
     assert len(miner.calls) == 1  # mining was not redone either

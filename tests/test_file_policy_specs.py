@@ -78,11 +78,14 @@ def test_replay_of_a_report_episode_does_not_load_the_reports_policy(capsys, pay
 
 def test_a_baseline_reports_policy_is_not_rerun_for_a_clip(tmp_path):
     from dv2s_gym.regress.clips import ClipError, render_policy_video
+    from dv2s_gym.regress.records import RegressReport
+    from scenario_bank.records import RegressEpisode
 
-    report = {"baseline": {"spec": "marker:make", "report": str(tmp_path / "old.json")}}
+    report = RegressReport.from_dict({"baseline": {"spec": "marker:make", "report": str(tmp_path / "old.json")}})
+    result = RegressEpisode.from_dict({"id": "highway_lead_vehicle_brakes/0", "role": "baseline",
+                                       "scenario": "highway_lead_vehicle_brakes", "seed": 0})
     with pytest.raises(ClipError, match="not a built-in policy"):
-        render_policy_video(report, {"scenario": "highway_lead_vehicle_brakes", "seed": 0}, "baseline",
-                            tmp_path / "clip.webm")
+        render_policy_video(report, result, "baseline", tmp_path / "clip.webm")
 
 
 def test_replay_of_a_mining_run_bounds_its_env_config(capsys, tmp_path):

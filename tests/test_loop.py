@@ -247,13 +247,13 @@ def test_fine_tune_continues_the_checkpoint_and_writes_a_card(tmp_path):
                      n_envs=1, vec_env="dummy", progress_bar=False, log=lambda _: None)
     card = read_card(path)
     shipped = read_card(SHIPPED_CHECKPOINT)
-    start = shipped["training"]["steps"]
-    assert card["fine_tune"]["source_steps"] == start
-    assert card["training"]["steps"] >= start + 200  # the step counter continues (one rollout of 512)
-    assert card["training"]["segments"][-1]["start_step"] == start
-    assert card["sampler"]["mode"] == "weighted"
-    assert card["sampler"]["final_probabilities"] == pytest.approx({SOURCES[0]: 0.75, SOURCES[1]: 0.25})
-    assert card["env_config"] == shipped["env_config"]  # the same reward as the source
+    start = shipped.training["steps"]
+    assert card.fine_tune.source_steps == start
+    assert card.training["steps"] >= start + 200  # the step counter continues (one rollout of 512)
+    assert card.training["segments"][-1]["start_step"] == start
+    assert card.sampler["mode"] == "weighted"
+    assert card.sampler["final_probabilities"] == pytest.approx({SOURCES[0]: 0.75, SOURCES[1]: 0.25})
+    assert card.env_config == shipped.env_config  # the same reward as the source
     assert (out / "README.md").read_text().count("Fine-tuned from dv2s-ppo") == 1
     before, after = _parameters("dv2s-ppo"), _parameters(f"ppo:{path}")
     assert before.shape == after.shape and not np.allclose(before, after)
@@ -265,7 +265,7 @@ def test_fine_tune_continues_the_checkpoint_and_writes_a_card(tmp_path):
                      vec_env="dummy", progress_bar=False, learning_rate=1e-5, log=lambda _: None)
     model = load_policy(f"ppo:{slow}").model
     assert model.learning_rate == 1e-5 and model.lr_schedule(0.5) == 1e-5
-    assert read_card(slow)["fine_tune"]["learning_rate"] == 1e-5
+    assert read_card(slow).fine_tune.learning_rate == 1e-5
     with pytest.raises(TrainingError, match="stable-baselines3 checkpoint"):
         fine_tune("rule", bank_dir=None, out=tmp_path / "x", steps=10, weights={SOURCES[0]: 1})
 
@@ -372,10 +372,10 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     assert steps["regress"]["verdict"] in ("PASS", "FAIL", "INCONCLUSIVE")
     assert steps["fine_tune"]["mined_upweighted"] == 2  # the held-out ones are not trained on
     card = read_card(steps["fine_tune"]["model"])
-    assert not set(held) & set(card["sampler"]["weights"])
-    assert not set(steps["split"]["held_out_families"]) & set(card["sampler"]["weights"])  # nor their parents
+    assert not set(held) & set(card.sampler["weights"])
+    assert not set(steps["split"]["held_out_families"]) & set(card.sampler["weights"])  # nor their parents
     control_card = read_card(steps["control"]["model"])
-    assert not {e["scenario"] for e in steps["mine"]["kept"]} & set(control_card["sampler"]["weights"])
+    assert not {e["scenario"] for e in steps["mine"]["kept"]} & set(control_card.sampler["weights"])
     assert set(record["timings"]) >= {"mine", "before", "fine_tune", "after", "regress"}
     assert report.policy == record["new_policy"] and report.policy.startswith("ppo:")
     data = json.loads(report.paths["json"].read_text())

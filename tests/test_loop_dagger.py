@@ -21,7 +21,7 @@ from policies.rule_based import CautiousDriver
 from policies.training import TrainingError, resolve_checkpoint
 
 SOURCES = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
-SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT)["env_config"]
+SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT).env_config
 
 
 def _labelled_states(spec, scenario, seeds, beta=0.0):
@@ -91,11 +91,11 @@ def test_dagger_moves_the_policy_toward_the_reference_and_saves_a_loadable_check
     policy = load_policy(f"ppo:{path}")
     assert type(policy.model).__name__ == "PPO"
     card = read_card(path)
-    tuned = card["fine_tune"]
+    tuned = card.fine_tune
     assert tuned["method"] == "dagger" and tuned["reference"] == "rule" and tuned["steps"] == 3600
     assert [h["beta"] for h in tuned["history"]] == [1.0, 0.5, 0.25]
     assert sum(h["steps"] for h in tuned["history"]) == tuned["agreement"]["states"] == 3600
-    assert card["env_config"] == SHIPPED_CONFIG and "evaluation" not in card
+    assert card.env_config == SHIPPED_CONFIG and card.evaluation is None and not card.evaluation_interrupted
     assert "DAgger" in (out / "README.md").read_text()
     # on the states it was trained on, the greedy action agrees with the reference far more often than before
     assert tuned["agreement"]["fine_tuned"] >= tuned["agreement"]["source"] + 0.2
@@ -134,9 +134,9 @@ def test_the_loop_runs_end_to_end_with_dagger(tmp_path):
     tuned = steps["fine_tune"]
     assert tuned["method"] == "dagger" and tuned["reward_weights"] is None and tuned["env_config"] == SHIPPED_CONFIG
     card = read_card(tuned["model"])
-    assert card["fine_tune"]["method"] == "dagger"
+    assert card.fine_tune.method == "dagger"
     held = steps["split"]["held_out"]
-    assert held and not set(held) & set(card["sampler"]["weights"])  # never trained on a held-out scenario
+    assert held and not set(held) & set(card.sampler["weights"])  # never trained on a held-out scenario
     assert steps["after"]["pairs"] == 2 * len(held)
     assert steps["regress"]["verdict"] in ("PASS", "FAIL", "INCONCLUSIVE")
     assert report.policy.startswith("ppo:") and report.policy.endswith("model.zip")

@@ -20,7 +20,7 @@ from policies.training import TrainingError, with_reward_weights
 from fine_tune_helpers import fine_tune
 
 SOURCES = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
-SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT)["env_config"]
+SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT).env_config
 
 
 def test_reward_overrides_change_only_the_named_terms():
@@ -59,8 +59,8 @@ def test_fine_tune_trains_with_the_overridden_reward_and_records_it(tmp_path, mo
     assert seen and all(w["standing"] == -1.0 for w in seen)  # the env the policy trained in
     assert all(w["collision"] == SHIPPED_CONFIG["reward_weights"]["collision"] for w in seen)
     card = read_card(path)
-    assert card["env_config"]["reward_weights"] == {**SHIPPED_CONFIG["reward_weights"], "standing": -1.0}
-    assert card["fine_tune"]["reward_weights"] == {"standing": -1.0}
+    assert card.env_config["reward_weights"] == {**SHIPPED_CONFIG["reward_weights"], "standing": -1.0}
+    assert card.fine_tune.reward_weights == {"standing": -1.0}
     assert '"standing": -1.0' in (tmp_path / "ft" / "README.md").read_text()
 
 
@@ -72,7 +72,7 @@ def _stub_fine_tune(calls):
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         shutil.copy(SHIPPED_CHECKPOINT, out / "model.zip")
-        card = read_card(SHIPPED_CHECKPOINT)
+        card = read_card(SHIPPED_CHECKPOINT).to_dict()
         card.update(env_config=with_reward_weights(env_config, reward_weights), fine_tune={"source": spec})
         (out / "model_card.json").write_text(json.dumps(card))
         return out / "model.zip"

@@ -99,7 +99,7 @@ def _tiny_ppo(path, observation_space):
 def test_sb3_checkpoint_loads_and_acts(envs, tmp_path):
     checkpoint = _tiny_ppo(tmp_path / "model.zip", envs[0].observation_space)
     policy = load_policy(str(checkpoint))
-    assert policy.card["algorithm"] == "ppo"
+    assert policy.card.algorithm == "ppo"
     policy.bind(envs)
     observations = np.stack([env.reset(seed=0)[0] for env in envs])
     assert policy.act(observations).shape == (2,)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from dv2s_gym.regress.records import PairedEpisode
 from dv2s_gym.regress.aggregates import (
     interquartile_mean,
     probability_of_improvement,
@@ -61,4 +62,5 @@ def test_report_carries_the_aggregates_as_context():
     assert "probability of improvement" in _markdown(report) and "the verdict is the paired failure test" in _markdown(report)
     alone = build_report(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
                          candidate={"spec": "new"}, baseline=None, episodes=[dict(e, baseline=None) for e in episodes])
-    assert alone["aggregates"] is None and return_aggregates([dict(e, baseline=None) for e in episodes]) is None
+    assert alone["aggregates"] is None and return_aggregates([PairedEpisode.from_dict(dict(e, baseline=None))
+                                                                  for e in episodes]) is None

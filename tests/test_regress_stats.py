@@ -1,4 +1,5 @@
-"""Statistics of ``dv2s regress`` (dv2s_gym/regress/stats.py): reference values and verdict rules.
+"""Statistics of ``dv2s regress`` (dv2s_gym/regress/stats.py) and the primitives it shares with the model cards
+(policies/stats.py: the Wilson interval, the exact McNemar test): reference values and verdict rules.
 
 Their Monte Carlo calibration (false alarms, P(PASS) at the margin, power, on the paired-outcome model) is
 bench/tests/test_regress_montecarlo.py."""
@@ -28,8 +29,8 @@ from dv2s_gym.regress.stats import (
     obrien_fleming_spending,
     paired_difference_interval,
     weighted_holm,
-    wilson_interval,
 )
+from policies.stats import StatisticsError, mcnemar_p, wilson_interval
 
 Z95 = 1.959963984540054
 
@@ -85,9 +86,9 @@ def test_clopper_pearson_known_value():
 
 
 def test_interval_arguments_are_checked():
-    with pytest.raises(ValueError):
+    with pytest.raises(StatisticsError, match="need 0 <= k <= n, got k=5, n=3"):
         wilson_interval(5, 3)
-    with pytest.raises(ValueError):
+    with pytest.raises(StatisticsError, match="confidence must be strictly between 0 and 1"):
         wilson_interval(1, 3, confidence=1.0)
     with pytest.raises(TypeError):
         wilson_interval(1.5, 3)
@@ -238,13 +239,14 @@ def test_mcnemar_exact_is_the_binomial_sum_over_discordant_pairs(b, c):
     assert mcnemar_exact(table, "greater") == pytest.approx(greater, rel=1e-12)
     assert mcnemar_exact(table, "less") == pytest.approx(less, rel=1e-12)
     assert mcnemar_exact(table) == pytest.approx(min(1.0, 2 * min(greater, less)), rel=1e-12)
+    assert mcnemar_p(b, c, "greater") == mcnemar_exact(table, "greater")  # the table's test is the counts' test
 
 
 def test_mcnemar_known_values():
     assert mcnemar_exact(PairedTable(0, 5, 0, 0), "greater") == pytest.approx(1 / 32)
     assert mcnemar_exact(PairedTable(0, 5, 0, 0)) == pytest.approx(1 / 16)
     assert mcnemar_exact(PairedTable(10, 0, 0, 10), "greater") == 1.0
-    with pytest.raises(ValueError):
+    with pytest.raises(StatisticsError, match="alternative must be 'two-sided', 'greater' or 'less'"):
         mcnemar_exact(PairedTable(), "bigger")
 
 

@@ -188,7 +188,7 @@ def test_mining_and_regression_refuse_a_config_the_policy_was_not_trained_with(t
     _check_can_mine(spec, MineSettings(budget=1, env_config=ROUTE_CONFIG))
     with pytest.raises(RegressError, match="--config: .*another observation"):
         _policy_info(spec, {})
-    assert _policy_info(spec, ROUTE_CONFIG)["card"]["env_config"] == ROUTE_CONFIG
+    assert _policy_info(spec, ROUTE_CONFIG).card.env_config == ROUTE_CONFIG
 
 
 def test_the_loop_runs_every_step_with_the_route_policys_observation(tmp_path, monkeypatch):

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from dv2s_gym.regress.stats import PairedTable, mcnemar_exact, wilson_interval
+from dv2s_gym.regress.stats import PairedTable, mcnemar_exact
 from policies.model_card import (
     MEASURES,
     bank_version,
@@ -17,11 +17,12 @@ from policies.model_card import (
     render_markdown,
 )
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
+from policies.stats import wilson_interval
 from policies.training import EVAL_SEED_BASE, TRAIN_SEED_LOW
 from scenario_bank.bank import Bank
 
 CARD = read_card(SHIPPED_CHECKPOINT)
-EVALUATION = CARD["evaluation"]
+EVALUATION = CARD.evaluation
 CANDIDATE = EVALUATION["candidate"]
 
 
@@ -39,10 +40,10 @@ def test_the_shipped_checkpoint_is_small_loads_and_matches_the_env_it_was_traine
     assert SHIPPED_CHECKPOINT.stat().st_size < 2 * 1024 * 1024
     assert (SHIPPED_CHECKPOINT.parent / "README.md").read_text(encoding="utf-8") == render_markdown(CARD)
     policy = load_policy("dv2s-ppo")
-    assert CARD["algorithm"] == "ppo" and policy.card["algorithm"] == "ppo"
+    assert CARD.algorithm == "ppo" and policy.card.algorithm == "ppo"
     from policies.evaluation import make_eval_env
 
-    env = make_eval_env(EVALUATION["scenarios"][:1], config=CARD["env_config"])
+    env = make_eval_env(EVALUATION["scenarios"][:1], config=CARD.env_config)
     try:
         policy.bind([env])  # raises PolicySpaceError if the spaces differ
     finally:
@@ -50,12 +51,12 @@ def test_the_shipped_checkpoint_is_small_loads_and_matches_the_env_it_was_traine
 
 
 def test_the_card_describes_its_training_and_the_current_bank():
-    training = CARD["training"]
+    training = CARD.training
     assert training["command"].startswith("dv2s train --algo ppo")
     assert training["steps"] > 0 and training["wall_time_s"] > 0 and training["seed"] == 0
     # trained on the whole bank as it is now: a changed script makes this card stale
-    assert CARD["bank"]["version"] == bank_version(EVALUATION["scenarios"])["version"]
-    assert EVALUATION["scenarios"] == sorted(CARD["bank"]["scenarios"]) == Bank().names()
+    assert CARD.bank["version"] == bank_version(EVALUATION["scenarios"])["version"]
+    assert EVALUATION["scenarios"] == sorted(CARD.bank["scenarios"]) == Bank().names()
     # held-out episodes: every scenario at least 20 seeds from EVAL_SEED_BASE, far below training seeds
     assert EVALUATION["seed_base"] == EVAL_SEED_BASE and EVALUATION["seeds_per_scenario"] >= 20
     assert max(seed for _, seed in iter_card_episodes(CARD)) < TRAIN_SEED_LOW
@@ -103,7 +104,7 @@ def test_rerunning_the_card_evaluation_reproduces_its_episodes_exactly():
     assert len(episodes) == RERUN_SEEDS_PER_SCENARIO * len(EVALUATION["scenarios"])
     for label in (CANDIDATE, "keep_lane"):
         spec = "dv2s-ppo" if label == CANDIDATE else label
-        config = CARD["env_config"] if label == CANDIDATE else {k: v for k, v in CARD["env_config"].items()
+        config = CARD.env_config if label == CANDIDATE else {k: v for k, v in CARD.env_config.items()
                                                                  if k != "action"}
         results = evaluate_parallel(spec, episodes, config=config, jobs=2)
         assert [(r.scenario, r.seed) for r in results] == episodes

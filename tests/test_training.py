@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from cli_helpers import one_line_error, run
+from policies.card_record import ModelCard
 from policies.model_card import bank_version, read_card
 from policies.registry import SB3Policy, load_policy
 from policies.training import (
@@ -133,14 +134,14 @@ def test_train_writes_model_card_logs_and_checkpoints_then_resumes(tmp_path, cap
     first_checkpoint = latest_checkpoint(out)
     assert first_checkpoint is not None and first_checkpoint.with_suffix(".sampler.json").is_file()
     card = read_card(out)
-    first_steps = card["training"]["steps"]
-    assert card["algorithm"] == "ppo" and first_steps >= 256 and card["training"]["n_envs"] == 2
-    assert card["bank"]["version"] == bank_version(SCENARIOS)["version"]
-    assert sorted(card["bank"]["scenarios"]) == SCENARIOS
-    assert card["hyperparameters"]["n_steps"] == 64 and card["hyperparameters"]["learning_rate"] == 5e-4
-    assert card["training"]["command"].startswith("dv2s train --algo ppo --steps 256 --envs 2 --seed 1")
-    assert card["training"]["wall_time_s"] > 0 and card["training"]["steps_per_s"] > 0
-    evaluation = card["evaluation"]
+    first_steps = card.training["steps"]
+    assert card.algorithm == "ppo" and first_steps >= 256 and card.training["n_envs"] == 2
+    assert card.bank["version"] == bank_version(SCENARIOS)["version"]
+    assert sorted(card.bank["scenarios"]) == SCENARIOS
+    assert card.hyperparameters["n_steps"] == 64 and card.hyperparameters["learning_rate"] == 5e-4
+    assert card.training["command"].startswith("dv2s train --algo ppo --steps 256 --envs 2 --seed 1")
+    assert card.training["wall_time_s"] > 0 and card.training["steps_per_s"] > 0
+    evaluation = card.evaluation
     assert evaluation["seed_base"] == EVAL_SEED_BASE and evaluation["episodes_total"] == 2
     for label in ("ppo", "keep_lane"):
         for measure in ("collision", "success", "off_road"):
@@ -158,11 +159,11 @@ def test_train_writes_model_card_logs_and_checkpoints_then_resumes(tmp_path, cap
     assert code == 0, err
     assert f"at step {first_steps}" in err
     card = read_card(out)
-    segments = card["training"]["segments"]
+    segments = card.training["segments"]
     assert [s["start_step"] for s in segments] == [0, first_steps]
     assert segments[1]["resumed_from"] == first_checkpoint.name
-    assert card["training"]["steps"] >= 512 and card["training"]["seed"] == 1  # settings came from run.json
-    assert load_policy(out / "model.zip").model.num_timesteps == card["training"]["steps"]
+    assert card.training["steps"] >= 512 and card.training["seed"] == 1  # settings came from run.json
+    assert load_policy(out / "model.zip").model.num_timesteps == card.training["steps"]
     # one TensorBoard curve, continued (a second events file in the same run folder)
     assert len(list((out / "tb").glob("PPO_1/events.out.tfevents.*"))) == 2
     assert not (out / "tb" / "PPO_2").exists()
@@ -215,7 +216,7 @@ def test_resume_of_a_finished_run_rewrites_its_card_and_one_stopped_before_its_f
     assert any("nothing to train" in line for line in lines)
     assert again["training"]["steps"] == first["training"]["steps"] == 64
     assert [s["status"] for s in again["training"]["segments"]] == ["finished", "finished"]
-    assert read_card(out)["training"]["steps"] == 64
+    assert read_card(out).training["steps"] == 64
     # a run folder with run.json but no checkpoint (interrupted while starting): --resume trains from step 0
     for path in (out / "checkpoints").iterdir():
         path.unlink()
@@ -224,7 +225,7 @@ def test_resume_of_a_finished_run_rewrites_its_card_and_one_stopped_before_its_f
     card = train(_tiny_config(out, "ppo", steps=64, hyperparameters={"n_steps": 64}), resume=True,
                  log=lines.append)
     assert any("holds no checkpoint yet" in line and "step 0" in line for line in lines)
-    assert [s["start_step"] for s in card["training"]["segments"]] == [0] and card["training"]["steps"] == 64
+    assert [s["start_step"] for s in card.training["segments"]] == [0] and card.training["steps"] == 64
     assert latest_checkpoint(out) is not None
 
 
@@ -248,19 +249,19 @@ def test_dqn_and_sac_train_tiny_and_load_through_the_registry(tmp_path, algo):
     out = tmp_path / algo
     hyperparameters = {"learning_starts": 50, "buffer_size": 1000, "batch_size": 16}
     card = train(_tiny_config(out, algo, steps=200, hyperparameters=hyperparameters), log=lambda line: None)
-    assert card["algorithm"] == algo and card["training"]["steps"] >= 200
+    assert card.algorithm == algo and card.training["steps"] >= 200
     policy = load_policy(out / "model.zip")
-    assert isinstance(policy, SB3Policy) and policy.card["algorithm"] == algo
+    assert isinstance(policy, SB3Policy) and policy.card.algorithm == algo
     if algo == "sac":  # SAC needs a continuous action space: train sets it
-        assert card["env_config"]["action"] == {"type": "ContinuousAction"}
+        assert card.env_config["action"] == {"type": "ContinuousAction"}
         assert isinstance(policy.action_space, gym.spaces.Box)
     else:
-        assert "action" not in card["env_config"] and isinstance(policy.action_space, gym.spaces.Discrete)
+        assert "action" not in card.env_config and isinstance(policy.action_space, gym.spaces.Discrete)
     # the replay buffer is checkpointed so a resumed off-policy run keeps its experience
     assert latest_checkpoint(out).with_suffix(".replay.pkl").is_file()
     from policies.evaluation import evaluate
 
-    result = evaluate(policy, [(SCENARIOS[0], EVAL_SEED_BASE)], config=card["env_config"])[0]
+    result = evaluate(policy, [(SCENARIOS[0], EVAL_SEED_BASE)], config=card.env_config)[0]
     assert result.steps > 0 and result.error is None
 
 
@@ -290,7 +291,7 @@ def test_dqn_trains_with_its_default_learning_rate_and_exploration(tmp_path, cap
     assert model.exploration_schedule(1 - 0.7) == pytest.approx(0.05)
     assert model.exploration_schedule(1 - 0.3) > 0.05
     assert (model.exploration_initial_eps, model.exploration_final_eps) == (1.0, 0.05)
-    hyperparameters = read_card(out)["hyperparameters"]
+    hyperparameters = read_card(out).hyperparameters
     assert hyperparameters["learning_rate"] == 5e-4 and hyperparameters["exploration_fraction"] == 0.7
 
 
@@ -309,10 +310,10 @@ def test_sac_trains_with_its_default_hyperparameters(tmp_path, capsys):
     assert (model.buffer_size, model.learning_starts, model.batch_size, model.gamma) == (50_000, 1000, 256, 0.9)
     assert model.policy.net_arch == [256, 256]
     card = read_card(out)
-    assert card["hyperparameters"] == {"policy": "MlpPolicy", "net_arch": [256, 256], "learning_rate": 3e-4,
+    assert card.hyperparameters == {"policy": "MlpPolicy", "net_arch": [256, 256], "learning_rate": 3e-4,
                                        "buffer_size": 50_000, "learning_starts": 1000, "batch_size": 256,
                                        "gamma": 0.9}
-    assert card["env_config"]["action"] == {"type": "ContinuousAction"}
+    assert card.env_config["action"] == {"type": "ContinuousAction"}
 
 
 def test_a_short_run_gets_a_short_card_evaluation_unless_told_otherwise():
@@ -427,7 +428,7 @@ def test_the_steps_a_run_really_trains_are_said_before_it_starts():
 def test_train_logs_its_start_up_and_the_steps_it_trains_to(tmp_path):
     lines = []
     card = train(_tiny_config(tmp_path / "run", "ppo", steps=300, hyperparameters={"n_steps": 128}), log=lines.append)
-    assert card["training"]["steps"] == 384
+    assert card.training["steps"] == 384
     assert any(line.startswith("starting 1 training env (in this process) on 1 scenario") for line in lines), lines
     assert "300 steps asked: trains to 384 (stable-baselines3 trains whole rollouts of 128 = 128 steps x 1 env)" \
         in lines
@@ -438,10 +439,11 @@ def test_a_card_whose_evaluation_was_interrupted_says_so_and_how_to_complete_it(
 
     card = {"name": "run", "algorithm": "ppo", "evaluation": None,
             "training": {"command": "dv2s train --steps 2000 --out out/train/run"}}
-    text = render_markdown(card)
+    text = render_markdown(ModelCard.from_dict(card))
     assert "Not evaluated: the held-out evaluation was interrupted" in text
     assert "`dv2s train --steps 2000 --out out/train/run --resume`" in text
-    assert "Not evaluated" not in render_markdown({k: v for k, v in card.items() if k != "evaluation"})  # skipped
+    skipped = ModelCard.from_dict({k: v for k, v in card.items() if k != "evaluation"})
+    assert "Not evaluated" not in render_markdown(skipped)
 
 
 def test_the_card_evaluation_says_how_long_it_has_left_once_its_first_episodes_are_done(monkeypatch):

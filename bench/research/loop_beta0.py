@@ -115,7 +115,8 @@ def _agreement(folder: Path) -> Optional[float]:
     model = folder / "policy" / "model.zip"
     if not model.is_file():
         return None
-    return ((read_model_card(model).get("fine_tune") or {}).get("agreement") or {}).get("fine_tuned")
+    tuned = read_model_card(model).fine_tune
+    return ((tuned.agreement if tuned is not None else None) or {}).get("fine_tuned")
 
 
 def analyse(out: Path) -> Dict[str, Any]:

@@ -140,7 +140,9 @@ def main() -> None:
     if args.method == "dagger":
         from policies.registry import read_model_card
 
-        result["dagger"] = {key: value for key, value in (read_model_card(path).get("fine_tune") or {}).items()
+        tuned = read_model_card(path).fine_tune
+        section = tuned.to_dict() if tuned is not None else {}
+        result["dagger"] = {key: value for key, value in section.items()
                             if key in ("agreement", "history", "iterations", "epochs", "beta_decay", "learning_rate")}
     if args.regress:
         from dv2s_gym.regress.runner import RegressSettings, WorkerSettings, run_regression

@@ -101,6 +101,7 @@ from scenario_bank.bank import Bank
 from scenario_bank.records import EpisodeRecord, RecordError
 from scenario_bank.run_identity import check_format, check_identity, record_format
 from policies.evaluation import EVAL_SEED_BASE
+from policies.card_record import FineTune, FineTuneMethod
 from policies.registry import SB3_ALGORITHMS, read_model_card
 from policies.run_identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
 
@@ -427,7 +428,7 @@ def _policy_env_config(spec: str) -> Dict[str, Any]:
     except TrainingError as error:
         raise LoopError(f"dv2s loop fine-tunes the policy, so it needs a stable-baselines3 checkpoint "
                         f"(dv2s-ppo, ppo:PATH or a `dv2s train` folder): {error}") from None
-    return dict(card.get("env_config") or {})
+    return dict(card.env_config or {})
 
 
 def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[str] = ()) -> RegressSummary:
@@ -1007,14 +1008,15 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
     weights, facts = arm_weights(arm.bank, excluded, mined_share, with_mined=with_mined)
     common = dict(scenarios=facts["scenarios"], mined_upweighted=facts["mined_upweighted"], steps=arm.steps,
                   mined_left_out=facts["mined_left_out"], families=tuple(facts["families"]))
-    if arm.method == "dagger":
-        return FineTuneArm.from_dict(_dagger_arm(current, out, weights, arm, label)).replace(method="dagger", **common)
+    if arm.method == FineTuneMethod.DAGGER:
+        return FineTuneArm.from_dict(_dagger_arm(current, out, weights, arm, label)).replace(
+            method=FineTuneMethod.DAGGER.value, **common)
     from policies.training import fine_tune
 
     config = dataclasses.replace(arm.config(out, weights), reward_weights=dict(arm.reward) or None,
                                  learning_rate=arm.learning_rate)
     path = fine_tune(current, config, log=arm.log)
-    return FineTuneArm(model=str(path.resolve()), method="ppo", **common, reward_weights=dict(arm.reward),
+    return FineTuneArm(model=str(path.resolve()), method=FineTuneMethod.PPO.value, **common, reward_weights=dict(arm.reward),
                        env_config=arm.fine_tune_config)
 
 
@@ -1025,10 +1027,10 @@ def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, l
     # a resumed run says so itself ("DAgger: resumed from ...", after the step's own line naming the arm)
     path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate,
                                                                              beta_decay=arm.beta_decay), log=arm.log)
-    dagger = read_model_card(path).get("fine_tune") or {}
-    return FineTuneArm(model=str(path.resolve()), method="dagger", reward_weights=None, env_config=arm.env_config,
-                       reference=dagger.get("reference"), agreement=dagger.get("agreement"),
-                       resumed=tuple(dagger.get("resumed") or []))
+    dagger = read_model_card(path).fine_tune or FineTune()
+    return FineTuneArm(model=str(path.resolve()), method=FineTuneMethod.DAGGER.value, reward_weights=None,
+                       env_config=arm.env_config, reference=dagger.reference, agreement=dagger.agreement,
+                       resumed=tuple(dagger.resumed or ()))
 
 
 def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]],

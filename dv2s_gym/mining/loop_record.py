@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
+from policies.card_record import FineTuneMethod
 from scenario_bank.records import JsonRecord
 
 __all__ = ["ErroredEpisodes", "LoopStart", "RecordedLoopSettings", "Rate", "PairedTable", "PairedSummary",
@@ -379,7 +380,7 @@ class FineTuneArm(JsonRecord):
     _WHAT: ClassVar[str] = "fine-tuning arm"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset({"reward_weights", "reference", "agreement"} if self.method == "dagger" else ())
+        return frozenset({"reward_weights", "reference", "agreement"} if self.method == FineTuneMethod.DAGGER else ())
 
 
 @dataclass(frozen=True, eq=False)

@@ -110,6 +110,7 @@ from dv2s_gym.regress.records import BankInfo, PairedComparison, PairedEpisode, 
 from dv2s_gym.regress.report import build_report, load_report, write_json
 from html import escape
 from pathlib import Path
+from policies.card_record import FineTuneMethod
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.entries import SIDECAR, read_json
 from typing import Any, Dict, List, Mapping, Optional
@@ -688,7 +689,7 @@ def _fine_tuning_lines(steps: RoundSteps) -> List[str]:
                          f"steps, same seed) on {tuned.scenarios} scenarios, the "
                          f"{tuned.mined_left_out} mined scenario(s) left out: `{tuned.model}`")
             continue
-        if tuned.method == "dagger":
+        if tuned.method == FineTuneMethod.DAGGER:
             agreement = tuned.agreement or {}
             lines.append(f"- fine-tuned by DAgger ({tuned.steps} labelled steps, imitating "
                          f"`{tuned.reference}` on the policy's own states) on {tuned.scenarios} "

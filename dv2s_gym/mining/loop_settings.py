@@ -8,6 +8,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 from dv2s_gym.mining.samplers import registered_samplers
 from envs.errors import DV2SError
+from policies.card_record import FINE_TUNE_METHODS as CARD_FINE_TUNE_METHODS
 from scenario_bank.run_identity import recorded_settings, resume_keys, setting
 from scenario_bank.field_checks import (check_bool, check_choice, check_int, check_mapping, check_names,
                                         check_number, check_path)
@@ -15,7 +16,7 @@ from scenario_bank.field_checks import (check_bool, check_choice, check_int, che
 __all__ = ["LoopError", "LoopSettings", "DEFAULTS", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES", "PROFILES",
            "DEFAULT_PROFILE", "EVIDENCE"]
 
-FINE_TUNE_METHODS = ("ppo", "dagger")
+FINE_TUNE_METHODS = CARD_FINE_TUNE_METHODS
 """How the loop fine-tunes: ``ppo`` continues PPO on the fine-tuning reward
 (:func:`policies.training.fine_tune`); ``dagger`` imitates the reference driver on the
 policy's own states (:func:`policies.imitation.dagger_fine_tune`)."""

@@ -16,7 +16,7 @@ Implemented with numpy (no dependency on the rliable package).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any, Optional, Union
+from typing import Any, Optional
 
 import numpy as np
 
@@ -111,24 +111,24 @@ def stratified_bootstrap(returns: Mapping[str, tuple[Sequence[float], Sequence[f
     return {"return_iqm": iqm, "probability_of_improvement": poi}
 
 
-def return_aggregates(episodes: Sequence[Union[PairedEpisode, Mapping[str, Any]]], *, resamples: int = RESAMPLES,
+def return_aggregates(episodes: Sequence[PairedEpisode], *, resamples: int = RESAMPLES,
                       seed: int = 0) -> Optional[dict[str, Any]]:
     """IQM of the return per policy and the probability of improvement, with stratified bootstrap intervals.
 
     Args:
-        episodes: the report's paired episodes (:class:`~dv2s_gym.regress.records.PairedEpisode`, or their JSON
-            objects); results that ended in an error or have no return are left out.
+        episodes: the report's paired episodes (:class:`~dv2s_gym.regress.records.PairedEpisode`); results that
+            ended in an error or have no return are left out.
 
     Returns:
         ``{"return_iqm": {"candidate", "baseline"}, "probability_of_improvement", "resamples", "confidence"}``
         with ``{"value", "low", "high"}`` entries, or None without a baseline or returns.
     """
     returns: dict[str, tuple[list, list]] = {}
-    for episode in map(PairedEpisode.from_dict, episodes):
+    for episode in episodes:
         for index, role in enumerate(("candidate", "baseline")):
             result = episode.result(role)
-            if result is not None and not result.get("error") and result.get("episode_return") is not None:
-                returns.setdefault(str(episode.scenario), ([], []))[index].append(float(result["episode_return"]))
+            if result is not None and not result.error and result.episode_return is not None:
+                returns.setdefault(str(episode.scenario), ([], []))[index].append(float(result.episode_return))
     if not returns or not any(base for _, base in returns.values()):
         return None
     found = stratified_bootstrap(returns, resamples=resamples, seed=seed)

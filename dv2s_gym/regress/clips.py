@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -19,7 +19,9 @@ from envs.errors import DV2SError
 from envs.trace import EpisodeTrace
 from envs.trace_bounds import check_file_config, TraceConfigError
 from envs.recording import VideoWriter
+from dv2s_gym.regress.records import BankInfo, RegressReport
 from dv2s_gym.regress.replay import bank_for_scenario
+from scenario_bank.records import RegressEpisode
 from policies.evaluation import make_eval_env, run_episode
 from policies.registry import load_policy, PolicyError, spec_from_file
 
@@ -78,7 +80,7 @@ def render_episode_video(trace_path: Union[str, os.PathLike], out_path: Union[st
     return _write_window(frames, seconds, frequency, out_path, f"episode trace {trace_path}", end_step)
 
 
-def render_policy_video(report: Dict[str, Any], result: Mapping[str, Any], role: str,
+def render_policy_video(report: RegressReport, result: RegressEpisode, role: str,
                         out_path: Union[str, os.PathLike], *,
                         seconds: float = DEFAULT_CLIP_CONFIG["seconds"], size: int = DEFAULT_CLIP_CONFIG["size"],
                         zoom: float = DEFAULT_CLIP_CONFIG["zoom"], end_step: Optional[int] = None) -> Path:
@@ -87,27 +89,28 @@ def render_policy_video(report: Dict[str, Any], result: Mapping[str, Any], role:
 
     For an episode that kept no trace (one that did not fail): the policy spec, scenario, seed and env
     config of the report, rendered off-screen like :func:`render_episode_video`. ``result`` is the episode's
-    result in the report (a :class:`~scenario_bank.records.RegressEpisode` or its JSON object). The re-run must
+    result in the report (a :class:`~scenario_bank.records.RegressEpisode`). The re-run must
     reproduce the report's trajectory hash, so the clip shows the very episode the report counted.
     """
-    spec = (report.get(role) or {}).get("spec")
+    policy_info = report.candidate if role == "candidate" else report.baseline
+    spec = policy_info.spec if policy_info is not None else None
     if not spec:
         raise ClipError(f"the report names no {role} policy to re-run")
-    if (report.get(role) or {}).get("report"):  # the spec came from another report file, not the command line
+    if policy_info.report:  # the spec came from another report file, not the command line
 
         try:
-            spec_from_file(spec, f"the baseline report {report[role]['report']}", "--baseline SPEC (instead of --baseline-report)")
+            spec_from_file(spec, f"the baseline report {policy_info.report}", "--baseline SPEC (instead of --baseline-report)")
         except PolicyError as error:
             raise ClipError(str(error)) from None
     if seconds <= 0 or size < 16 or zoom <= 0:
         raise ClipError(f"a clip needs seconds > 0, size >= 16 px and zoom > 0, "
                         f"not seconds={seconds}, size={size}, zoom={zoom}")
-    scenario, seed = result["scenario"], int(result["seed"])
+    scenario, seed = result.scenario, int(result.seed)
     try:
-        config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
+        config = check_file_config(report.settings.env_config if report.settings is not None else None, "the report")
     except TraceConfigError as error:
         raise ClipError(str(error)) from None
-    env = make_eval_env(None, config=config, bank_dir=bank_for_scenario(report.get("bank") or {}, scenario),
+    env = make_eval_env(None, config=config, bank_dir=bank_for_scenario(report.bank or BankInfo(), scenario),
                         render_mode="rgb_array")
     frames: List[np.ndarray] = []
     try:
@@ -120,7 +123,7 @@ def render_policy_video(report: Dict[str, Any], result: Mapping[str, Any], role:
         frequency = float(own.get("policy_frequency") or 5)
     finally:
         env.close()
-    expected = result.get("trajectory_hash")
+    expected = result.trajectory_hash
     if expected and rerun.trajectory_hash != expected:
         raise ClipError(f"the {role}'s run of {scenario}/{seed} did not reproduce (trajectory hash "
                         f"{rerun.trajectory_hash[:12]}, the report has {str(expected)[:12]}); the policy or the "

@@ -18,14 +18,20 @@ calling process alone is refused by the workers with a message saying so (see ``
 
 from __future__ import annotations
 
+import dataclasses
+
 from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress.errors import RegressError
 from envs.safety_metrics import DEFAULT_STALL_SECONDS
 from scenario_bank.failure_types import failure_table
+from scenario_bank.records import RegressEpisode
 
 __all__ = ["failure_kinds", "default_failure", "DEFAULT_STALL_SECONDS", "parse_failure",
-           "apply_failure", "missing_facts"]
+           "apply_failure", "missing_facts", "result_value"]
+
+_RECORD_FIELDS = frozenset(f.name for f in dataclasses.fields(RegressEpisode)) - {"extra", "null_fields",
+                                                                                   "result_extra"}
 
 
 def failure_kinds() -> Dict[str, str]:
@@ -81,3 +87,10 @@ def missing_facts(results: Iterable[Optional[Dict[str, Any]]], kinds: Sequence[s
         if result and not result.get("error"):
             lacking.update(kind for kind in kinds if fields[kind] not in result)
     return [kind for kind in fields if kind in lacking]
+
+
+def result_value(result: RegressEpisode, field: str) -> Any:
+    """The value of ``field`` of an episode's result (a failure kind's ``result_field`` or another measure): the
+    record's attribute, or for a field a plug-in's failure type adds, the value the result carries beside the
+    fields the record knows."""
+    return getattr(result, field) if field in _RECORD_FIELDS else result.extra.get(field)

@@ -1,7 +1,8 @@
 """The regression report as one self-contained HTML page.
 
-:func:`write_html` turns a report dict (the ``dv2s-regress`` schema written by the
-runner) into a single file with no external resources: inline CSS, plots drawn as
+:func:`write_html` turns a report (a :class:`~dv2s_gym.regress.records.RegressReport`, or the JSON object of
+the ``dv2s-regress`` schema written by the runner, read at the door) into a single file with no external
+resources: inline CSS, plots drawn as
 inline SVG by the small functions below (per-scenario failure and collision rates
 with their intervals, the paired difference per scenario against the margin,
 distributions of minimum time-to-collision and return), a verdict banner, tables with
@@ -26,13 +27,15 @@ import os
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from tqdm import tqdm
 
 from dv2s_gym.regress.clips import (DEFAULT_CLIP_CONFIG, ClipError, clip_window, render_episode_video,
                                     render_policy_video)
-from dv2s_gym.regress.report import scenarios_by_severity, warnings as report_warnings
+from dv2s_gym.regress.records import (BankInfo, PairedComparison, PairedEpisode, RegressReport, ReportSettings,
+                                      ScenarioResult, Summary)
+from dv2s_gym.regress.report import Report, scenarios_by_severity, warnings as report_warnings
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
                                   axis as _axis, escape as _e, finite as _num, fmt as _fmt,
                                   fmt_interval as _interval, interval_mark as _interval_mark, legend as _legend,
@@ -40,6 +43,7 @@ from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH,
                                   x_scale as _x_scale)
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.failure_types import FAILURE_TABLE
+from scenario_bank.records import RegressEpisode
 
 __all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
 
@@ -51,10 +55,10 @@ COLOURS = {"candidate": "#0b63c5", "baseline": "#8a8f98", "PASS": "#1a7f37", "FA
 
 
 # --------------------------------------------------------------------------- SVG plots
-def rate_plot(report: Mapping[str, Any], metric: str, title: str) -> str:
+def rate_plot(report: RegressReport, metric: str, title: str) -> str:
     """Forest plot: ``metric`` (a rate) per scenario and overall, with intervals, for both policies."""
     rows = _scenario_rows(report)
-    has_baseline = report.get("baseline") is not None
+    has_baseline = report.baseline is not None
     height = TOP + ROW * len(rows) + BOTTOM
     x = _x_scale(0.0, 1.0)[2]
     body = _axis(x, 0.0, 1.0, height, title)
@@ -66,21 +70,21 @@ def rate_plot(report: Mapping[str, Any], metric: str, title: str) -> str:
         y = TOP + ROW * i + ROW / 2
         body.append(_row_label(y, name, bold=overall))
         for role, offset, shape in (("candidate", -4 if has_baseline else 0, "circle"), ("baseline", 4, "square")):
-            summary = entry.get(role) if isinstance(entry, Mapping) else None
-            stat = summary.get(metric) if isinstance(summary, Mapping) else None
+            summary = entry.candidate if role == "candidate" else entry.baseline
+            stat = summary.rates.get(metric) if summary is not None else None
             if isinstance(stat, Mapping):
                 tip = f"{name}, {role}: {metric.replace('_', ' ')} {_interval(stat)}"
                 body.append(_interval_mark(x, y + offset, stat, COLOURS[role], shape, tip))
     return _svg(height, title, body)
 
 
-def difference_plot(report: Mapping[str, Any]) -> str:
+def difference_plot(report: RegressReport) -> str:
     """Paired difference (candidate − baseline failure rate) per scenario, with the margin line."""
-    rows = [(n, e, o) for n, e, o in _scenario_rows(report) if isinstance(e.get("comparison"), Mapping)]
-    margin = _num((report.get("settings") or {}).get("margin")) or 0.0
+    rows = [(n, e, o) for n, e, o in _scenario_rows(report) if e.comparison is not None]
+    margin = _num(report.settings.margin if report.settings is not None else None) or 0.0
     values = [margin, 0.0]
     for _, entry, _ in rows:
-        diff = entry["comparison"].get("difference") or {}
+        diff = entry.comparison.difference or {}
         values += [v for v in (_num(diff.get(k)) for k in ("value", "low", "high")) if v is not None]
     bound = min(1.0, max(0.1, max(abs(v) for v in values) * 1.1))
     low, high = -bound, bound
@@ -95,14 +99,14 @@ def difference_plot(report: Mapping[str, Any]) -> str:
     body.append(_legend([(v.lower(), COLOURS[v], "circle") for v in ("PASS", "FAIL", "INCONCLUSIVE")]))
     for i, (name, entry, overall) in enumerate(rows):
         y = TOP + ROW * i + ROW / 2
-        comparison = entry["comparison"]
-        verdict = comparison.get("verdict")
+        comparison = entry.comparison
+        verdict = comparison.verdict
         colour = COLOURS.get(verdict, COLOURS[None])
         body.append(_row_label(y, name, bold=overall))
-        tip = f"{name}: difference {_interval(comparison.get('difference'))}, {verdict or 'no verdict'}"
-        if comparison.get("reason"):
-            tip += f" ({comparison['reason']})"
-        body.append(_interval_mark(x, y, comparison.get("difference") or {}, colour, "circle", tip))
+        tip = f"{name}: difference {_interval(comparison.difference)}, {verdict or 'no verdict'}"
+        if comparison.reason:
+            tip += f" ({comparison.reason})"
+        body.append(_interval_mark(x, y, comparison.difference or {}, colour, "circle", tip))
     return _svg(height, title, body)
 
 
@@ -148,38 +152,39 @@ def _bin_label(low: float, high: float) -> str:
     return f"{low:.3g}–{high:.3g}"
 
 
-def _scenario_rows(report: Mapping[str, Any]) -> List[Tuple[str, Mapping[str, Any], bool]]:
+def _scenario_rows(report: RegressReport) -> List[Tuple[str, ScenarioResult, bool]]:
     """Scenarios worst first (:func:`~dv2s_gym.regress.report.scenarios_by_severity`), then overall."""
-    scenarios = {name: entry for name, entry in (report.get("scenarios") or {}).items() if isinstance(entry, Mapping)}
+    scenarios = dict(report.scenarios or {})
     try:
-        order = scenarios_by_severity({"scenarios": scenarios})
+        order = scenarios_by_severity(report)
     except (TypeError, ValueError, AttributeError):  # a hand-edited report: fall back to names
         order = sorted(scenarios)
     rows = [(str(name), scenarios[name], False) for name in order]
-    overall = report.get("overall")
-    if isinstance(overall, Mapping):
-        rows.append(("overall", overall, True))
+    if report.overall is not None:
+        rows.append(("overall", report.overall, True))
     return rows
 
 
-def _episode_values(report: Mapping[str, Any], role: str, key: str) -> List[Optional[float]]:
+def _episode_values(report: RegressReport, role: str, measure: Callable[[RegressEpisode], Any]
+                    ) -> List[Optional[float]]:
     values = []
-    for episode in report.get("episodes") or []:
-        result = episode.get(role) if isinstance(episode, Mapping) else None
-        if isinstance(result, Mapping) and not result.get("error"):
-            values.append(_num(result.get(key)))
+    for episode in report.episodes or ():
+        result = episode.result(role)
+        if result is not None and not result.error:
+            values.append(_num(measure(result)))
     return values
 
 
-def distribution_plots(report: Mapping[str, Any]) -> List[str]:
+def distribution_plots(report: RegressReport) -> List[str]:
     """Histograms of minimum time-to-collision and episode return per policy."""
-    roles = ["candidate"] + (["baseline"] if report.get("baseline") is not None else [])
-    ttc = {role: _episode_values(report, role, "min_ttc") for role in roles}
+    roles = ["candidate"] + (["baseline"] if report.baseline is not None else [])
+    ttc = {role: _episode_values(report, role, lambda result: result.min_ttc) for role in roles}
     finite = {role: [v for v in ttc[role] if v is not None] for role in roles}
     no_conflict = {role: sum(v is None for v in ttc[role]) for role in roles}
     plots = [histogram_plot(finite, "Minimum time-to-collision per episode [s]",
                             [0, 1, 2, 3, 4, 5, 6, 8, 10, math.inf], no_conflict, "none")]
-    returns = {role: [v for v in _episode_values(report, role, "episode_return") if v is not None] for role in roles}
+    returns = {role: [v for v in _episode_values(report, role, lambda result: result.episode_return) if v is not None]
+               for role in roles}
     every = [v for values in returns.values() for v in values]
     if every:
         low, high = min(every), max(every)
@@ -192,29 +197,29 @@ def distribution_plots(report: Mapping[str, Any]) -> List[str]:
 
 
 # --------------------------------------------------------------------------- page
-def _banner(report: Mapping[str, Any]) -> str:
-    verdict = report.get("verdict")
-    candidate = (report.get("candidate") or {}).get("spec")
-    baseline = (report.get("baseline") or {}).get("spec") if report.get("baseline") else None
+def _banner(report: RegressReport) -> str:
+    verdict = report.verdict
+    candidate = report.candidate.spec if report.candidate is not None else None
+    baseline = report.baseline.spec if report.baseline is not None else None
     css = verdict if verdict in ("PASS", "FAIL", "INCONCLUSIVE", "ERROR") else "NONE"
-    if verdict == "ERROR" and report.get("baseline") is None:
-        head = f"ERROR: {_e(candidate)} (measures only): {_e(report.get('error_reason', ''))}"
+    if verdict == "ERROR" and report.baseline is None:
+        head = f"ERROR: {_e(candidate)} (measures only): {_e(report.error_reason)}"
     elif verdict is None:
         head = f"No verdict: {_e(candidate)} was run without a baseline"
     else:
         head = f"{_e(verdict)}: {_e(candidate)} against {_e(baseline)}"
     detail = []
-    regressed = report.get("regressed") or []
+    regressed = report.regressed or ()
     if regressed:
         detail.append(f"regressed on {len(regressed)} scenario(s): {_e(', '.join(map(str, regressed)))}")
-    comparison = (report.get("overall") or {}).get("comparison")
-    if isinstance(comparison, Mapping) and comparison.get("reason"):
-        detail.append(f"overall: {_e(comparison['reason'])}")
-    if report.get("newly_failing"):
-        detail.append(f"{len(report['newly_failing'])} newly failing episode(s)")
-    if report.get("errors"):
-        detail.append(f"{len(report['errors'])} error(s)")
-    if report.get("stopped_early"):
+    comparison = report.overall.comparison if report.overall is not None else None
+    if comparison is not None and comparison.reason:
+        detail.append(f"overall: {_e(comparison.reason)}")
+    if report.newly_failing:
+        detail.append(f"{len(report.newly_failing)} newly failing episode(s)")
+    if report.errors:
+        detail.append(f"{len(report.errors)} error(s)")
+    if report.stopped_early:
         detail.append("stopped early (sequential test)")
     small = f"<small>{'; '.join(detail)}</small>" if detail else ""
     banner = f'<div class="banner {css}" id="verdict">{head}{small}</div>'
@@ -223,68 +228,71 @@ def _banner(report: Mapping[str, Any]) -> str:
     return banner
 
 
-def _settings_table(report: Mapping[str, Any]) -> str:
-    settings = report.get("settings") or {}
-    bank = report.get("bank") or {}
-    rows = [("candidate", (report.get("candidate") or {}).get("spec")),
-            ("baseline", (report.get("baseline") or {}).get("spec") if report.get("baseline") else "none")]
-    rows += [(key, settings.get(key)) for key in ("episodes", "seed", "margin", "alpha", "sequential", "backend",
-                                                  "workers") if key in settings]
-    rows += [("bank", f"{bank.get('path', '')} (version {bank.get('version', '?')})"),
-             ("created", report.get("created")), ("dv2s version", report.get("dv2s_version"))]
+def _settings_table(report: RegressReport) -> str:
+    settings = report.settings or ReportSettings()
+    bank = report.bank or BankInfo()
+    written = settings.to_dict()  # the settings the run recorded (a null one included)
+    rows = [("candidate", report.candidate.spec if report.candidate is not None else None),
+            ("baseline", report.baseline.spec if report.baseline is not None else "none")]
+    rows += [(key, getattr(settings, key)) for key in ("episodes", "seed", "margin", "alpha", "sequential", "backend",
+                                                       "workers") if key in written]
+    version = "?" if bank.version is None else bank.version
+    rows += [("bank", f"{'' if bank.path is None else bank.path} (version {version})"),
+             ("created", report.created), ("dv2s version", report.dv2s_version)]
     return "<table>" + "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows) + "</table>"
 
 
-def _scenario_table(report: Mapping[str, Any]) -> str:
-    has_baseline = report.get("baseline") is not None
+def _scenario_table(report: RegressReport) -> str:
+    has_baseline = report.baseline is not None
     head = ["scenario", "episodes", "candidate failure rate"]
     if has_baseline:
         head += ["baseline failure rate", "both fail / cand. only / base. only / neither", "difference",
                  "p", "p (adjusted)", "verdict", "reason"]
     out = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + "</tr>"]
     for name, entry, overall in _scenario_rows(report):
-        candidate = entry.get("candidate") or {}
+        candidate = entry.candidate or Summary()
         cells = [f"<td>{'<b>' if overall else ''}{_e(name)}{'</b>' if overall else ''}</td>",
-                 f'<td class="num">{_e(candidate.get("episodes", ""))}</td>',
-                 f'<td class="num">{_e(_interval(candidate.get("failure_rate")))}</td>']
+                 f'<td class="num">{_e(candidate.episodes)}</td>',
+                 f'<td class="num">{_e(_interval(candidate.failure_rate))}</td>']
         if has_baseline:
-            baseline = entry.get("baseline") or {}
-            comparison = entry.get("comparison") or {}
-            table = comparison.get("table") or {}
+            baseline = entry.baseline or Summary()
+            comparison = entry.comparison or PairedComparison()
+            table = comparison.table or {}
             counts = " / ".join(str(table.get(k, "–")) for k in ("both_fail", "candidate_only", "baseline_only",
                                                                   "neither"))
-            verdict = comparison.get("verdict")
-            cells += [f'<td class="num">{_e(_interval(baseline.get("failure_rate")))}</td>',
+            verdict = comparison.verdict
+            cells += [f'<td class="num">{_e(_interval(baseline.failure_rate))}</td>',
                       f'<td class="num">{_e(counts)}</td>',
-                      f'<td class="num">{_e(_interval(comparison.get("difference"), 3))}</td>',
-                      f'<td class="num">{_e(_fmt(comparison.get("p_value"), 4))}</td>',
-                      f'<td class="num">{_e(_fmt(comparison.get("p_adjusted"), 4))}</td>',
+                      f'<td class="num">{_e(_interval(comparison.difference, 3))}</td>',
+                      f'<td class="num">{_e(_fmt(comparison.p_value, 4))}</td>',
+                      f'<td class="num">{_e(_fmt(comparison.p_adjusted, 4))}</td>',
                       f'<td class="v-{_e(verdict)}">{_e(verdict or "–")}</td>',
-                      f"<td>{_e(comparison.get('reason', ''))}</td>"]
+                      f"<td>{_e(comparison.reason)}</td>"]
         out.append("<tr>" + "".join(cells) + "</tr>")
     return "".join(out) + "</table>"
 
 
-def _outcome_detail(kind: str, result: Mapping[str, Any]) -> str:
+def _outcome_detail(kind: str, result: RegressEpisode) -> str:
     """What an episode's outcome says after a failure kind's label: whom it collided with, when it stalled."""
-    if kind == "collision" and result.get("collisions"):
-        return f" with {', '.join(map(str, result.get('collisions') or []))}"
-    stall = _num(result.get("stall_time")) if kind == "stall" else None
+    if kind == "collision" and result.collisions:
+        return f" with {', '.join(map(str, result.collisions))}"
+    stall = _num(result.stall_time) if kind == "stall" else None
     return f" from {stall:.1f} s" if stall is not None else ""
 
 
-def _outcome(result: Any) -> str:
-    if not isinstance(result, Mapping):
+def _outcome(result: Optional[RegressEpisode]) -> str:
+    if result is None:
         return "not run"
-    if result.get("error"):
-        return f"error: {result['error']}"
+    if result.error:
+        return f"error: {result.error}"
+    # a failure kind's result field is one of the record's attributes (collided, off_road, stalled)
     parts = [row.label + _outcome_detail(row.name, result) for row in FAILURE_TABLE
-             if row.label and row.result_field and result.get(row.result_field)]
+             if row.label and row.result_field and getattr(result, row.result_field)]
     if not parts:
-        parts.append("success" if result.get("success") else "no failure")
-    ttc = _num(result.get("min_ttc"))
+        parts.append("success" if result.success else "no failure")
+    ttc = _num(result.min_ttc)
     parts.append(f"min TTC {'none' if ttc is None else f'{ttc:.2f} s'}")
-    parts.append(f"{result.get('steps', '?')} steps")
+    parts.append(f"{'?' if result.steps is None else result.steps} steps")
     return ", ".join(parts)
 
 
@@ -298,59 +306,59 @@ def _resolve_trace(trace: Any, base: Path) -> Optional[Path]:
     return None
 
 
-def _clip(report: Mapping[str, Any], episode: Mapping[str, Any], role: str, base: Path, scratch: Path,
+def _clip(report: RegressReport, episode: PairedEpisode, role: str, base: Path, scratch: Path,
           given: Optional[VideoSource], render_videos: bool, end_step: Optional[int] = None
           ) -> Tuple[Optional[bytes], str]:
     """One side of a pair: the given clip, the trace's replay, or (no trace) a re-run of the policy; rendered
     ones cover the clip's seconds up to ``end_step`` (default: the episode's end)."""
-    result = episode.get(role)
+    result = episode.result(role)
     if given is not None:
         return _video_bytes(given), ""
     if not render_videos:
         return None, "clips were not rendered"
-    if not isinstance(result, Mapping) or result.get("error"):
+    if result is None or result.error:
         return None, f"the {role} has no run of this scene to show"
-    out = scratch / f"{role}-{abs(hash(str(episode.get('id'))))}.webm"
+    out = scratch / f"{role}-{abs(hash(str(episode.id)))}.webm"
     try:
-        trace = _resolve_trace(result.get("trace"), base)
+        trace = _resolve_trace(result.trace, base)
         if trace is not None:
             return render_episode_video(trace, out, end_step=end_step).read_bytes(), ""
         if role == "candidate":
             return None, "no trace was recorded for this episode"
-        return render_policy_video(dict(report), dict(result), role, out, end_step=end_step).read_bytes(), ""
+        return render_policy_video(report, result, role, out, end_step=end_step).read_bytes(), ""
     except (ClipError, OSError, AssertionError, ValueError) as error:
         return None, f"clip not available: {error}"
 
 
-def _pair_window(report: Mapping[str, Any], episode: Mapping[str, Any]) -> Tuple[Optional[int], str]:
+def _pair_window(report: RegressReport, episode: PairedEpisode) -> Tuple[Optional[int], str]:
     """``(end step, the caption's words)`` of a pair of clips: both sides show the same seconds of the scene,
     those up to the candidate's failure (its last step)."""
-    steps = _num((episode.get("candidate") or {}).get("steps")) if isinstance(episode.get("candidate"), Mapping) \
-        else None
+    steps = _num(episode.candidate.steps) if episode.candidate is not None else None
     if steps is None:
         return None, ""
-    config = (report.get("settings") or {}).get("env_config") or {}
+    config = (report.settings.env_config if report.settings is not None else None) or {}
     frequency = float(_num(config.get("policy_frequency")) or 5)
     first, last = clip_window(int(steps), DEFAULT_CLIP_CONFIG["seconds"], frequency)
     return int(steps), (f", both from {first / frequency:.1f} s to {last / frequency:.1f} s of the episode "
                         "(the seconds up to the candidate's failure)")
 
 
-def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, VideoSource]],
+def _clips(report: RegressReport, base: Path, videos: Optional[Mapping[str, VideoSource]],
            render_videos: bool, max_videos: int, progress: bool = False) -> str:
     """The newly failing episodes, grouped by scenario (worst first): the candidate's clip beside the
     baseline's run of the same scene; ``progress``: a bar on stderr over the clips rendered."""
-    newly = [str(i) for i in report.get("newly_failing") or []]
+    newly = [str(i) for i in report.newly_failing or ()]
     if not newly:
         return '<p class="muted">No episode fails for the candidate that the baseline passes.</p>'
-    episodes = {str(e.get("id")): e for e in report.get("episodes") or [] if isinstance(e, Mapping)}
+    episodes = {str(e.id): e for e in report.episodes or ()}
     videos = dict(videos or {})
     order = [name for name, _, overall in _scenario_rows(report) if not overall]
     by_scenario: dict = {}
     for episode_id in newly:
-        scenario = str((episodes.get(episode_id) or {}).get("scenario") or episode_id.rsplit("/", 1)[0])
+        known = episodes.get(episode_id)
+        scenario = str((known.scenario if known is not None else None) or episode_id.rsplit("/", 1)[0])
         by_scenario.setdefault(scenario, []).append(episode_id)
-    regressed = set(map(str, report.get("regressed") or []))
+    regressed = set(map(str, report.regressed or ()))
     out, shown, left = [], 0, []
     bar = None
     if progress and render_videos:
@@ -367,7 +375,7 @@ def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, 
                 if shown >= max_videos:
                     left.append(episode_id)
                     continue
-                episode = episodes.get(episode_id, {})
+                episode = episodes.get(episode_id) or PairedEpisode()
                 end_step, window = _pair_window(report, episode)
                 sides = []
                 for role in ("candidate", "baseline"):
@@ -378,9 +386,9 @@ def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, 
                         bar.update(1)
                     media = video_tag(data) if data is not None else f'<p class="muted">{_e(note)}</p>'
                     sides.append(f'<figure class="side {role}">{media}<figcaption><b>{role}</b>: '
-                                 f"{_e(_outcome(episode.get(role)))}</figcaption></figure>")
+                                 f"{_e(_outcome(episode.result(role)))}</figcaption></figure>")
                 out.append(f'<div class="clip pair" id="clip-{shown}"><p><b>{_e(episode_id)}</b> (seed '
-                           f'{_e(episode.get("seed", ""))}): the same scene, candidate beside baseline'
+                           f'{_e(episode.seed)}): the same scene, candidate beside baseline'
                            f'{_e(window)}</p><div class="sides">{"".join(sides)}</div></div>')
                 shown += 1
             out.append("</div></section>")
@@ -391,9 +399,9 @@ def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, 
     return "".join(out)
 
 
-def _aggregates(report: Mapping[str, Any]) -> str:
+def _aggregates(report: RegressReport) -> str:
     """The return aggregates (interquartile mean, probability of improvement) as context, not the verdict."""
-    aggregates = report.get("aggregates")
+    aggregates = report.aggregates
     if not isinstance(aggregates, Mapping):
         return ""
     iqm = aggregates.get("return_iqm") or {}
@@ -407,27 +415,27 @@ def _aggregates(report: Mapping[str, Any]) -> str:
             f'<table id="aggregates">{body}</table>')
 
 
-def _errors(report: Mapping[str, Any]) -> str:
-    errors = report.get("errors") or []
+def _errors(report: RegressReport) -> str:
+    errors = report.errors or ()
     if not errors:
         return '<p class="muted">None.</p>'
     items = []
     for error in errors:
-        if isinstance(error, Mapping):
-            label = " ".join(str(error.get(k)) for k in ("role", "id") if error.get(k))
-            items.append(f"<li><b>{_e(label)}</b>: {_e(error.get('error', error))}</li>")
-        else:
-            items.append(f"<li>{_e(error)}</li>")
+        label = " ".join(str(value) for value in (error.role, error.id) if value)
+        items.append(f"<li><b>{_e(label)}</b>: {_e(error.error if 'error' in error.to_dict() else error.to_dict())}"
+                     "</li>")
     return "<ul>" + "".join(items) + "</ul>"
 
 
-def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".",
+def render_html(report: Report, *, base: Union[str, os.PathLike] = ".",
                 videos: Optional[Mapping[str, VideoSource]] = None, render_videos: bool = True,
                 max_videos: int = MAX_VIDEOS, progress: bool = False) -> str:
     """The report page as a string (see :func:`write_html`); relative trace paths resolve against ``base``."""
-    title = f"dv2s regress: {(report.get('candidate') or {}).get('spec', '?')}"
-    has_baseline = report.get("baseline") is not None
-    failure = ", ".join(report["settings"]["failure"])
+    report = RegressReport.from_json(report)
+    spec = report.candidate.spec if report.candidate is not None else None
+    title = f"dv2s regress: {'?' if spec is None else spec}"
+    has_baseline = report.baseline is not None
+    failure = ", ".join(report.settings.failure)
     plots = [(f"Failure ({failure}) rate per scenario, 95% intervals",
               rate_plot(report, "failure_rate", "Failure rate")),
              ("Collision rate per scenario, 95% intervals", rate_plot(report, "collision_rate", "Collision rate"))]
@@ -450,7 +458,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
         "<h2>Scenarios</h2>", _scenario_table(report),
         "<h2>Plots</h2>", figures,
         _aggregates(report),
-        f"<h2>Newly failing episodes ({len(report.get('newly_failing') or [])})</h2>",
+        f"<h2>Newly failing episodes ({len(report.newly_failing or ())})</h2>",
         _clips(report, Path(base), videos, render_videos, max_videos, progress),
         "<h2>Errors</h2>", _errors(report),
         f"<script>{SELFTEST}</script></body></html>",
@@ -458,13 +466,13 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
     return "\n".join(parts)
 
 
-def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
+def write_html(report: Report, path: Union[str, os.PathLike], *,
                videos: Optional[Mapping[str, VideoSource]] = None, render_videos: bool = True,
                max_videos: int = MAX_VIDEOS, progress: bool = False) -> Path:
     """Write the report as one self-contained HTML file at ``path`` (atomically); returns the path.
 
     Args:
-        report: a ``dv2s-regress`` report dict.
+        report: a ``dv2s-regress`` report (:class:`~dv2s_gym.regress.records.RegressReport` or its JSON object).
         path: the ``.html`` file to write; relative trace paths in the report resolve against its folder.
         videos: clips to embed, by episode id (``"<scenario>/<seed>"``; ``"<scenario>/<seed>#baseline"`` for the
             baseline's run of the same scene): a ``.webm`` path or its bytes.
@@ -474,7 +482,7 @@ def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
         progress: a progress bar on stderr while the clips render (they take seconds each).
     """
     path = Path(path)
-    page = render_html(report, base=path.parent, videos=videos, render_videos=render_videos,
+    page = render_html(RegressReport.from_json(report), base=path.parent, videos=videos, render_videos=render_videos,
                        max_videos=max_videos, progress=progress)
     path.parent.mkdir(parents=True, exist_ok=True)
     return atomic_write_text(path, page)

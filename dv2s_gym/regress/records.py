@@ -27,10 +27,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
+from policies.card_record import ModelCard
 from scenario_bank.records import JsonRecord, RecordError, RegressEpisode
 
 __all__ = ["RegressReport", "BankInfo", "ReportSettings", "PolicyInfo", "PairedEpisode", "Summary",
-           "PairedComparison", "ScenarioResult", "EpisodeError", "SequentialOutcome", "ReportRecord"]
+           "PairedComparison", "ScenarioResult", "EpisodeError", "SequentialOutcome", "ReportRecord", "as_result"]
 
 Interval = Mapping[str, Any]
 """``{"value", "low", "high"}`` (a rate adds ``count``, a mean ``n``); values ``None`` without episodes."""
@@ -112,29 +113,42 @@ class PolicyInfo(ReportRecord):
     report: Optional[str] = None
     role: Optional[str] = None
     spec: Optional[str] = None
-    card: Optional[Mapping[str, Any]] = None
+    card: Optional[ModelCard] = None
     warning: Optional[str] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
     _KINDS: ClassVar[Dict[str, str]] = {"report": "str", "role": "str", "spec": "str", "card": "object",
                                         "warning": "str"}
+    _NESTED: ClassVar[Dict[str, type]] = {"card": ModelCard}
     _WHAT: ClassVar[str] = "report policy"
 
     def default_null_fields(self) -> FrozenSet[str]:
         return frozenset({"card"})
 
 
-def _result(value: Any) -> Any:
-    """A paired episode's side: a :class:`RegressEpisode` (a result of a run: it has the record's required fields),
-    else the JSON object as given (a report other code made from partial results)."""
+def as_result(value: Any) -> Optional[RegressEpisode]:
+    """A policy's result of one episode as a :class:`RegressEpisode` (``None`` for ``None``): a result of a run (it
+    has the record's required fields) checked field by field; a partial one (a report other code made) taken as
+    it is."""
     if isinstance(value, RegressEpisode):
         return value
     if isinstance(value, Mapping) and RegressEpisode.has_required(value):
         return RegressEpisode.from_dict(value)
     if value is not None and not isinstance(value, Mapping):
         raise RecordError(f"a regression result must be a JSON object, not {type(value).__name__}")
-    return value
+    return _partial_result(value) if value is not None else None
+
+
+def _partial_result(value: Mapping[str, Any]) -> RegressEpisode:
+    """The record of a partial result (one without an ``id``, ``role``, ``scenario`` or ``seed``, which every run's
+    result has), its JSON object unchanged: the missing fields stay missing (or ``null``) in
+    :meth:`~RegressEpisode.to_dict`."""
+    placeholders = {key: blank for key, blank in (("id", ""), ("role", ""), ("scenario", ""), ("seed", 0))
+                    if value.get(key) is None}
+    record = RegressEpisode.from_checked({**value, **placeholders})
+    nulls = frozenset(key for key in placeholders if key in value)
+    return record.replace(**{key: None for key in placeholders}, null_fields=(record.null_fields or frozenset()) | nulls)
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,8 +159,8 @@ class PairedEpisode(ReportRecord):
     id: Optional[str] = None
     scenario: Optional[str] = None
     seed: Optional[int] = None
-    candidate: Optional[Mapping[str, Any]] = None
-    baseline: Optional[Mapping[str, Any]] = None
+    candidate: Optional[RegressEpisode] = None
+    baseline: Optional[RegressEpisode] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -159,18 +173,16 @@ class PairedEpisode(ReportRecord):
 
     @classmethod
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
-        return {role: _result(data[role]) for role in ("candidate", "baseline") if data.get(role) is not None}
+        return {role: as_result(data[role]) for role in ("candidate", "baseline") if data.get(role) is not None}
 
-    def result(self, role: str) -> Optional[Mapping[str, Any]]:
+    def result(self, role: str) -> Optional[RegressEpisode]:
         """The ``"candidate"``'s or the ``"baseline"``'s result."""
         return self.candidate if role == "candidate" else self.baseline
 
     def errored(self, role: str) -> bool:
         """Whether ``role`` ran this pair and its episode ended in an error."""
         result = self.result(role)
-        if isinstance(result, RegressEpisode):
-            return bool(result.error)
-        return result is not None and bool(result.get("error"))
+        return result is not None and bool(result.error)
 
     def to_dict(self) -> Dict[str, Any]:
         out = super().to_dict()

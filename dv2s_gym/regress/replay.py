@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Union
+from typing import Any, Dict, List, Optional, Union
 import difflib
 
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.records import BankInfo, RegressReport
+from scenario_bank.records import RegressEpisode
 from dv2s_gym.regress.report import bank_info, load_report
 from envs.recording import VideoWriter
 from envs.trace import EpisodeTrace
@@ -27,28 +28,25 @@ from policies.registry import load_policy, spec_from_file
 __all__ = ["find_episode", "replay_episode", "bank_for_scenario"]
 
 
-def find_episode(report: Union[RegressReport, Mapping[str, Any]], episode_id: str, role: str = "candidate"
-                 ) -> Mapping[str, Any]:
-    """The result of ``role`` in episode ``episode_id`` of a report (clear errors otherwise): a
-    :class:`~scenario_bank.records.RegressEpisode`."""
+def find_episode(report: RegressReport, episode_id: str, role: str = "candidate") -> RegressEpisode:
+    """The result of ``role`` in episode ``episode_id`` of a report (clear errors otherwise)."""
     if role not in ("candidate", "baseline"):
         raise RegressError(f"--policy must be 'candidate' or 'baseline', not {role!r}")
-    report = RegressReport.from_json(report)
     episodes = {e.id: e for e in report.episodes or ()}
     if episode_id not in episodes:
         near = difflib.get_close_matches(episode_id, list(episodes), n=3, cutoff=0.6)
         hint = f" Did you mean {', '.join(near)}?" if near else ""
         failing = list(report.newly_failing or ()) or [i for i, e in episodes.items()
-                                                        if (e.candidate or {}).get("failed")]
+                                                        if e.candidate is not None and e.candidate.failed]
         examples = f" Failed episodes: {', '.join(failing[:5])}." if failing else ""
         raise RegressError(f"the report has no episode {episode_id!r} (ids are scenario/seed).{hint}{examples}")
     result = episodes[episode_id].result(role)
     if result is None:
         raise RegressError(f"episode {episode_id} has no {role} result (the run had no baseline); "
                            "use --policy candidate")
-    if result.get("error"):
+    if result.error:
         raise RegressError(f"episode {episode_id} ({role}) ended in an error and has nothing to replay: "
-                           f"{result['error'].splitlines()[0]}")
+                           f"{result.error.splitlines()[0]}")
     return result
 
 
@@ -69,7 +67,7 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
     report = load_report(report_path)
     result = find_episode(report, episode_id, role)
     frames: Optional[List[Any]] = [] if video else None
-    trace_path = result.get("trace")
+    trace_path = result.trace
     if trace_path and not Path(trace_path).is_absolute():
         trace_path = str(report_path.parent / trace_path)
     if trace_path and not from_policy:
@@ -93,7 +91,7 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
             for frame in frames or []:
                 writer.write(frame)
         written = str(video)
-    expected = result.get("trajectory_hash")
+    expected = result.trajectory_hash
     return {"id": episode_id, "role": role, "source": source, "steps": steps, "trajectory_hash": digest,
             "expected_hash": expected, "matches": digest == expected, "video": written}
 
@@ -109,26 +107,25 @@ def _from_trace(path: str, frames: Optional[List[Any]]):
         env.close()
 
 
-def _from_policy(report: RegressReport, result: Mapping[str, Any], spec: str, frames: Optional[List[Any]]):
+def _from_policy(report: RegressReport, result: RegressEpisode, spec: str, frames: Optional[List[Any]]):
     config = check_file_config(report.settings.env_config if report.settings else None, "the report")
     bank = report.bank or BankInfo()
-    scenario = result["scenario"]
+    scenario = result.scenario
     bank_dir = bank_for_scenario(bank, scenario)
     env = make_eval_env(None, config=config, bank_dir=bank_dir,
                         render_mode="rgb_array" if frames is not None else None)
     try:
         policy = load_policy(spec)
         policy.bind([env])
-        rerun, _ = run_episode(env, policy, scenario, int(result["seed"]), frames=frames)
+        rerun, _ = run_episode(env, policy, scenario, int(result.seed), frames=frames)
         return rerun.steps, rerun.trajectory_hash, env.unwrapped.config["policy_frequency"]
     finally:
         env.close()
 
 
-def bank_for_scenario(bank: Union[BankInfo, Mapping[str, Any]], scenario: str) -> Optional[str]:
+def bank_for_scenario(bank: BankInfo, scenario: str) -> Optional[str]:
     """The report's bank folder, or the shipped bank when that folder is not on this machine, as long as
     the scenario's script is the one the report ran."""
-    bank = BankInfo.from_json(bank)
     expected = (bank.hashes or {}).get(scenario)
     path = bank.path
     here = None

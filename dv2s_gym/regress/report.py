@@ -94,15 +94,16 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.aggregates import return_aggregates
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
-from dv2s_gym.regress.failures import failure_kinds
+from dv2s_gym.regress.failures import failure_kinds, result_value
 from policies.run_identity import installed_version
 from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, PairedEpisode, PolicyInfo,
-                                      RegressReport, ReportSettings, ScenarioResult, SequentialOutcome, Summary)
+                                      RegressReport, ReportSettings, ScenarioResult, SequentialOutcome, Summary,
+                                      as_result)
 from dv2s_gym.regress.store import describe_differences
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
-from scenario_bank.records import RecordError
+from scenario_bank.records import RecordError, RegressEpisode
 
 __all__ = [
     "SCHEMA",
@@ -119,7 +120,8 @@ __all__ = [
     "check_baseline_report",
     "write_json",
     "write_markdown",
-    "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings"]
+    "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings",
+    "Report"]
 
 SCHEMA = "dv2s-regress"
 SCHEMA_VERSION = 2
@@ -162,8 +164,8 @@ def _verdict(value: Any) -> str:
 
 
 # ------------------------------------------------------------------------------ summaries
-def _ok(results: Sequence[Mapping[str, Any]]) -> List[Mapping[str, Any]]:
-    return [r for r in results if r is not None and not r.get("error")]
+def _ok(results: Sequence[RegressEpisode]) -> List[RegressEpisode]:
+    return [r for r in results if r is not None and not r.error]
 
 
 def _rate(values: Sequence[bool]) -> Dict[str, Any]:
@@ -190,27 +192,29 @@ def _finite(value: Any) -> Optional[float]:
     return value if math.isfinite(value) else None
 
 
-def summarize_groups(groups: Mapping[str, Sequence[Mapping[str, Any]]], *, episode_groups: bool = False
-                     ) -> Summary:
+def summarize_groups(groups: Mapping[str, Sequence[Union[RegressEpisode, Mapping[str, Any]]]], *,
+                     episode_groups: bool = False) -> Summary:
     """Summary over several scenarios: rates over all episodes, means resampling whole scenarios.
 
-    With ``episode_groups`` every episode is its own group (the within-scenario interval).
+    With ``episode_groups`` every episode is its own group (the within-scenario interval). A result is a
+    :class:`~scenario_bank.records.RegressEpisode` or its JSON object (a worker's or another tool's).
     """
-    every = [r for results in groups.values() for r in results if r is not None]
+    groups = {name: [as_result(r) for r in results if r is not None] for name, results in groups.items()}
+    every = [r for results in groups.values() for r in results]
     ok = _ok(every)
     means: Dict[str, Any] = {}
     for key, field in MEANS:
-        per_group = [[v for v in (_finite(r.get(field)) for r in _ok(results)) if v is not None]
+        per_group = [[v for v in (_finite(result_value(r, field)) for r in _ok(results)) if v is not None]
                      for results in groups.values()]
         if episode_groups:
             per_group = [[v] for values in per_group for v in values]
         means[key] = _mean(per_group)
     return Summary(episodes=len(ok), errors=len(every) - len(ok),
-                   rates={key: _rate([bool(r.get(field)) for r in ok]) for key, field in rates()},
+                   rates={key: _rate([bool(result_value(r, field)) for r in ok]) for key, field in rates()},
                    min_ttc=means["min_ttc"], mean_speed=means["mean_speed"], episode_return=means["return"])
 
 
-def summarize(results: Sequence[Mapping[str, Any]]) -> Summary:
+def summarize(results: Sequence[Union[RegressEpisode, Mapping[str, Any]]]) -> Summary:
     """Summary of one policy on one scenario (episodes resampled for the means' intervals)."""
     return summarize_groups({"": results}, episode_groups=True)
 
@@ -242,15 +246,14 @@ def _complete(pair: PairedEpisode) -> bool:
 
 def _paired_table(pairs: Sequence[PairedEpisode]) -> "stats.PairedTable":
     complete = [p for p in pairs if _complete(p)]
-    return stats.PairedTable.from_outcomes([bool(p.candidate["failed"]) for p in complete],
-                                           [bool(p.baseline["failed"]) for p in complete])
+    return stats.PairedTable.from_outcomes([bool(p.candidate.failed) for p in complete],
+                                           [bool(p.baseline.failed) for p in complete])
 
 
-def paired_tables(episodes: Sequence[Union[PairedEpisode, Mapping[str, Any]]], scenarios: Sequence[str]
-                  ) -> Dict[str, "stats.PairedTable"]:
+def paired_tables(episodes: Sequence[PairedEpisode], scenarios: Sequence[str]) -> Dict[str, "stats.PairedTable"]:
     """The paired table of each scenario (pairs with an error on either side left out)."""
     by_scenario: Dict[str, List[PairedEpisode]] = {name: [] for name in scenarios}
-    for episode in map(PairedEpisode.from_dict, episodes):
+    for episode in episodes:
         by_scenario.setdefault(episode.scenario, []).append(episode)
     return {name: _paired_table(pairs) for name, pairs in by_scenario.items()}
 
@@ -298,10 +301,10 @@ def build_report(*, bank: Mapping[str, Any], settings: Mapping[str, Any], candid
     for episode in paired:
         by_scenario.setdefault(episode.scenario, []).append(episode)
 
-    def results(name: str, role: str) -> List[Mapping[str, Any]]:
+    def results(name: str, role: str) -> List[RegressEpisode]:
         return [e.result(role) for e in by_scenario[name] if e.result(role) is not None]
 
-    errors = [EpisodeError(id=e.id, role=role, error=e.result(role)["error"]) for e in paired
+    errors = [EpisodeError(id=e.id, role=role, error=e.result(role).error) for e in paired
               for role in ("candidate", "baseline") if e.errored(role)]
     compared = _compare(paired, by_scenario, errors, settings, sequential) if has_baseline else _Compared()
     report_scenarios = {name: ScenarioResult(
@@ -363,8 +366,7 @@ def _compare(episodes: List[PairedEpisode], by_scenario: Dict[str, List[PairedEp
                   f"{sequential.verdict}; {reason}")
     if errors:
         verdict, reason = "ERROR", f"{_error_reason(errors)}; without them: {verdict}, {reason}"
-    newly_failing = [e.id for e in episodes if _complete(e) and e.candidate.get("failed")
-                     and not e.baseline.get("failed")]
+    newly_failing = [e.id for e in episodes if _complete(e) and e.candidate.failed and not e.baseline.failed]
     return _Compared(per_scenario=comparisons, overall=comparison_json(overall, verdict=verdict, reason=reason),
                      verdict=verdict, regressed=[name for name, c in comparisons.items() if c.verdict == "FAIL"],
                      newly_failing=newly_failing, power=_power(tables, margin, alpha, settings),

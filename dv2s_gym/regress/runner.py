@@ -58,6 +58,7 @@ from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.records import RecordError, RegressEpisode
 from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, RegressReport, SequentialOutcome
+from policies.card_record import ModelCard
 from policies.registry import PolicySpaceError, load_policy
 
 __all__ = ["run_regression", "run_size", "RegressSettings", "BaselineReport", "WorkerSettings", "bank_info",
@@ -98,7 +99,7 @@ def _policy_info(spec: str, env_config: Optional[Dict[str, Any]] = None) -> Poli
     while policy is not None and card is None:
         card = getattr(policy, "card", None) or None
         policy = getattr(policy, "inner", None)
-    return PolicyInfo(spec=spec, card=card)
+    return PolicyInfo(spec=spec, card=ModelCard.from_dict(card) if card is not None else None)
 
 
 def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], monitor: MonitorSettings) -> None:
@@ -153,15 +154,14 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
     if their is None:
         raise RegressError(f"baseline report {path} has no {role} policy (it ran without a baseline); "
                            "use --baseline-role candidate")
-    results: Dict[str, Dict[str, Any]] = {}
+    results: Dict[str, RegressEpisode] = {}
     for episode in old.episodes or ():
         result = episode.result(role)
         if result is None:
             continue
-        result = dict(result)
-        trace = result.get("trace")
-        if trace and not Path(trace).is_absolute():
-            result["trace"] = str((path.parent / trace).resolve())  # the old folder's traces, wherever this run is
+        if result.trace and not Path(result.trace).is_absolute():
+            # the old folder's traces, wherever this run is
+            result = result.replace(trace=str((path.parent / result.trace).resolve()))
         results[episode.id] = result
     missing = [task_id(n, s) for s in seeds for n in names if task_id(n, s) not in results]
     if missing:
@@ -171,7 +171,7 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
             f"episode(s) per scenario from seed {old.settings.seed}: use --episodes and --seed within those, "
             "or rerun the baseline with more episodes")
     wanted = [results[task_id(n, s)] for s in seeds for n in names]
-    lacking = missing_facts(wanted, failure)
+    lacking = missing_facts([result.to_dict() for result in wanted], failure)  # the facts the file records
     if lacking:
         raise ReportMismatchError(
             f"baseline report {path} does not record {', '.join(lacking)} for its episodes (that run had no such failure "
@@ -180,9 +180,9 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
     if "stall" in failure and float(their_stall) != monitor.stall_seconds:
         raise ReportMismatchError(f"baseline report {path} detected stalls after {their_stall:g} s, this run after "
                                   f"{monitor.stall_seconds:g} s; use the same stall time, or rerun the baseline")
-    for result in results.values():
-        apply_failure(result, failure)
-    records = {episode_id: _baseline_record(path, result) for episode_id, result in results.items()}
+    # judged by this run's failure kinds: the JSON object re-marked, read back as a record
+    records = {episode_id: _baseline_record(path, apply_failure(result.to_dict(), failure))
+               for episode_id, result in results.items()}
     theirs, ours = old.dv2s_version, installed_version()
     warning = None if theirs == ours else (
         f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
@@ -236,7 +236,7 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     workers = workers or WorkerSettings()
     plan = _prepare(candidate, baseline, settings)
     store = RunStore(Path(out_dir if out_dir is not None else DEFAULT_OUT), _identity(plan, settings))
-    done = {key: result for key, result in store.open().items() if not result.get("error")}  # errors run again
+    done = {key: result for key, result in store.open().items() if not result.error}  # errors run again
     policies = {"candidate": candidate, **({"baseline": plan.baseline_spec} if plan.baseline_spec else {})}
     all_tasks = plan_tasks(policies, plan.names, plan.seeds, env_config=plan.env_config, bank_dir=plan.bank_dir,
                            trace_dir=str(store.traces_dir.resolve()), failure=plan.failure,

@@ -65,6 +65,11 @@ PASS needs the upper end of the two-sided ``1 - 2 a_k`` interval below the margi
 and without interim PASS (``stop_for_pass=False``): it stops early only for FAIL, and the gate
 (:func:`compare_scenarios`, with the pooled member decided by the sequential test) gives the verdict.
 
+The primitives
+--------------
+The Wilson interval (:func:`wilson_interval`) and the exact McNemar test are :mod:`policies.stats`'s, shared
+with the model cards of :mod:`policies.model_card`.
+
 Power
 -----
 :mod:`dv2s_gym.regress.power` plans a run's episodes and states its power. How these rules behave on
@@ -88,6 +93,7 @@ from scipy import stats
 
 from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT, gate_rejections
 from dv2s_gym.regress.errors import RegressError, SequenceStoppedError
+from policies.stats import check_count, check_level, mcnemar_p, two_sided_z, wilson_bounds, wilson_interval
 from scenario_bank.errors import WrongTypeError
 
 __all__ = ["DEFAULT_ALPHA", "DEFAULT_MARGIN", "DEFAULT_CORRELATION", "Verdict", "wilson_interval",
@@ -125,56 +131,6 @@ _VERDICT_OF_CODE = {_FAIL: Verdict.FAIL, _PASS: Verdict.PASS, _INCONCLUSIVE: Ver
 # Intervals for one proportion
 
 
-def _check_level(value: float, name: str) -> float:
-    value = float(value)
-    if not 0.0 < value < 1.0:
-        raise RegressError(f"{name} must be strictly between 0 and 1, got {value}")
-    return value
-
-
-def _two_sided_z(confidence: float) -> float:
-    """Normal quantile for a two-sided interval of the given confidence."""
-    return float(stats.norm.ppf(0.5 + _check_level(confidence, "confidence") / 2.0))
-
-
-def _check_count(k: int, n: int) -> tuple[int, int]:
-    k, n = operator.index(k), operator.index(n)
-    if n < 0 or not 0 <= k <= n:
-        raise RegressError(f"need 0 <= k <= n, got k={k}, n={n}")
-    return k, n
-
-
-def _wilson_bounds(k: np.ndarray, n: np.ndarray, z: float) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised Wilson score bounds; ``(0, 1)`` where ``n == 0``."""
-    k = np.asarray(k, dtype=float)
-    n = np.asarray(n, dtype=float)
-    size = np.where(n > 0, n, 1.0)
-    p = k / size
-    z2 = z * z
-    denominator = 1.0 + z2 / size
-    centre = (p + z2 / (2.0 * size)) / denominator
-    half = z * np.sqrt(np.maximum(p * (1.0 - p), 0.0) / size + z2 / (4.0 * size * size)) / denominator
-    low = np.where((n > 0) & (k > 0), np.clip(centre - half, 0.0, 1.0), 0.0)
-    high = np.where((n > 0) & (k < n), np.clip(centre + half, 0.0, 1.0), 1.0)
-    return low, high
-
-
-def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    """Wilson score interval for a binomial proportion.
-
-    Args:
-        k: Number of successes (here: failed episodes).
-        n: Number of trials.
-        confidence: Two-sided confidence level.
-
-    Returns:
-        ``(low, high)``; ``(0.0, 1.0)`` when ``n == 0``.
-    """
-    k, n = _check_count(k, n)
-    low, high = _wilson_bounds(np.array(k), np.array(n), _two_sided_z(confidence))
-    return float(low), float(high)
-
-
 def clopper_pearson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
     """Clopper-Pearson ("exact") interval for a binomial proportion, from beta quantiles.
 
@@ -186,8 +142,8 @@ def clopper_pearson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[
     Returns:
         ``(low, high)``; ``(0.0, 1.0)`` when ``n == 0``.
     """
-    k, n = _check_count(k, n)
-    tail = (1.0 - _check_level(confidence, "confidence")) / 2.0
+    k, n = check_count(k, n)
+    tail = (1.0 - check_level(confidence, "confidence")) / 2.0
     if n == 0:
         return 0.0, 1.0
     low = 0.0 if k == 0 else float(stats.beta.ppf(tail, k, n - k + 1))
@@ -225,7 +181,7 @@ def cluster_bootstrap_mean(
     Raises:
         RegressError: If there are no values at all (a ValueError).
     """
-    tail = (1.0 - _check_level(confidence, "confidence")) / 2.0
+    tail = (1.0 - check_level(confidence, "confidence")) / 2.0
     sums = np.array([float(np.sum(np.asarray(g, dtype=float))) for g in groups if len(g) > 0])
     sizes = np.array([len(g) for g in groups if len(g) > 0], dtype=float)
     if sizes.size == 0:
@@ -384,8 +340,8 @@ def _newcombe_bounds(
     n = a + b + c + d
     size = np.where(n > 0, n, 1.0)
     p1, p2 = (a + b) / size, (a + c) / size
-    l1, u1 = _wilson_bounds(a + b, n, z)
-    l2, u2 = _wilson_bounds(a + c, n, z)
+    l1, u1 = wilson_bounds(a + b, n, z)
+    l2, u2 = wilson_bounds(a + c, n, z)
     # correlation of the two margins, with Newcombe's correction: a positive ad - bc is reduced
     # by n/2 (floored at 0); zero if a margin is empty (a rate of 0 or 1)
     margins = (a + b) * (c + d) * (a + c) * (b + d)
@@ -431,7 +387,7 @@ def paired_difference_interval(table: PairedTable, confidence: float = 0.95) -> 
     Returns:
         ``(low, high)`` within ``[-1, 1]``; ``(-1.0, 1.0)`` for an empty table.
     """
-    z = _two_sided_z(confidence)
+    z = two_sided_z(confidence)
     low, high = _newcombe_bounds(
         np.array(table.both_fail), np.array(table.candidate_only),
         np.array(table.baseline_only), np.array(table.neither), z,
@@ -440,10 +396,7 @@ def paired_difference_interval(table: PairedTable, confidence: float = 0.95) -> 
 
 
 def mcnemar_exact(table: PairedTable, alternative: str = "two-sided") -> float:
-    """Exact McNemar p-value: a binomial test of the discordant pairs.
-
-    Given ``m`` discordant pairs, the number where the candidate failed is Binomial(m, 1/2)
-    when the policies fail alike.
+    """Exact McNemar p-value of a paired table (:func:`policies.stats.mcnemar_p` of its discordant counts).
 
     Args:
         table: The paired counts.
@@ -453,12 +406,7 @@ def mcnemar_exact(table: PairedTable, alternative: str = "two-sided") -> float:
     Returns:
         The p-value; 1.0 when there are no discordant pairs.
     """
-    if alternative not in ("two-sided", "greater", "less"):
-        raise RegressError(f"alternative must be 'two-sided', 'greater' or 'less', got {alternative!r}")
-    if table.discordant == 0:
-        return 1.0
-    result = stats.binomtest(table.candidate_only, table.discordant, 0.5, alternative=alternative)
-    return float(min(1.0, result.pvalue))
+    return mcnemar_p(table.candidate_only, table.baseline_only, alternative)
 
 
 def _mcnemar_greater(candidate_only: np.ndarray, baseline_only: np.ndarray) -> np.ndarray:
@@ -614,7 +562,7 @@ def compare(
     Returns:
         The :class:`Comparison`.
     """
-    alpha = _check_level(alpha, "alpha")
+    alpha = check_level(alpha, "alpha")
     if not 0.0 <= margin < 1.0:
         raise RegressError(f"margin must be in [0, 1), got {margin}")
     interval = paired_difference_interval(table, 1.0 - alpha)
@@ -803,7 +751,7 @@ class SequentialTest:
         if operator.index(max_episodes) < 1:
             raise RegressError(f"max_episodes must be positive, got {max_episodes}")
         self.margin = float(margin)
-        self.alpha = _check_level(alpha, "alpha")
+        self.alpha = check_level(alpha, "alpha")
         self.max_episodes = int(max_episodes)
         self.spending = SPENDING
         self.stop_for_pass = bool(stop_for_pass)
