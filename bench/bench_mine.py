@@ -9,7 +9,7 @@
     python -m bench.bench_mine --part breadth --budget 100 --seeds 0 1 2   # breadth on three policies
     python -m bench.bench_mine --part saturation --budget 60 --saturation-budget 300 --seeds 50
 
-**Samplers** (``--part samplers``): every sampler of :data:`dv2s_gym.mining.samplers.SAMPLERS`
+**Samplers** (``--part samplers``): every sampler of :data:`dv2s_gym.mining.sampling.samplers.SAMPLERS`
 mines the same policy on the same scenarios (the whole shipped bank by default) with the
 same budget, once per run seed (``--seeds``; the seed fixes the sampler's draws and every
 episode's env seed). Printed per sampler, pooled over the seeds: failed episodes per 100
@@ -38,7 +38,7 @@ budget, which bounds the ratio any sampler can reach on that policy.
 the same load; episodes per minute end to end (scene space and worker pool start included) and the ratio
 (target >= 1.8x). A non-adaptive sampler also runs with 2 workers one chunk at a time (what the miner did
 before it sent whole chunks ahead, and still does for adaptive samplers): the cost of the idle worker at the
-end of each chunk (an adaptive sampler streams on the sliding-window schedule, ``dv2s_gym/mining/window.py``). The
+end of each chunk (an adaptive sampler streams on the sliding-window schedule, ``dv2s_gym/mining/sampling/window.py``). The
 machine's parallel capacity (a busy loop in 2 processes against 1, from ``bench.bench_regress``)
 is measured in the same rounds: other processes on a shared machine bound the ratio by it.
 """
@@ -71,7 +71,7 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     from dv2s_gym.mining.miner import MineSettings, WorkerSettings, mine
 
     shutil.rmtree(out, ignore_errors=True)
-    from dv2s_gym.mining.samplers import SAMPLER_OPTIONS
+    from dv2s_gym.mining.sampling.samplers import SAMPLER_OPTIONS
 
     takes = SAMPLER_OPTIONS.get(sampler, ())
     options = {k: v for k, v in (sampler_options or {}).items() if k in takes}  # random/halton take none
@@ -86,7 +86,7 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     failures = run.failures
     avoidable = [r for r in failures if r.get("avoidable") is True]
     clusters = set(run.clusters.values())
-    from dv2s_gym.mining.rate import failure_rate
+    from dv2s_gym.mining.sampling.rate import failure_rate
 
     rate = failure_rate(run.records, scenarios=list(run.settings.scenarios or ()) or None,
                         sampler=run.settings.sampler)
@@ -145,7 +145,7 @@ def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], b
                    split_configs: Sequence[Config] = (SPLIT_PRESET,)) -> Dict[str, Dict[str, Any]]:
     """Every sampler (each adaptive one in every config; ``split`` in each of ``split_configs``) on every
     seed; the summary by entry (printed)."""
-    from dv2s_gym.mining.samplers import SPLIT, is_adaptive
+    from dv2s_gym.mining.sampling.samplers import SPLIT, is_adaptive
     from dv2s_gym.regress.stats import wilson_interval
 
     entries: List[Tuple[str, str, Config]] = []
@@ -217,7 +217,7 @@ BREADTH_POLICIES = ("idm", "keep_lane", "rule?action_noise=0.2")
 
 def _rate_text(row: Dict[str, Any]) -> str:
     """The run's importance-weighted failure-rate estimate under the scenarios' own distributions
-    (``dv2s_gym.mining.rate``), with its 95 % interval and effective sample size."""
+    (``dv2s_gym.mining.sampling.rate``), with its 95 % interval and effective sample size."""
     if row.get("rate") is None:
         return "n/a (no proposal densities)"
     value, low, high, ess = row["rate"]
@@ -316,7 +316,7 @@ def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats:
     """
     from bench.bench_regress import parallel_capacity
     from dv2s_gym.mining import miner
-    from dv2s_gym.mining.samplers import is_adaptive
+    from dv2s_gym.mining.sampling.samplers import is_adaptive
 
     shipped = miner.LOOKAHEAD_CHUNKS
     batch = batch or 8  # the same for 1 and 2 workers: both run the same episodes (the miner's default: 4 per worker)
@@ -360,7 +360,7 @@ def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats:
 
 
 def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
-    from dv2s_gym.mining.samplers import SAMPLERS
+    from dv2s_gym.mining.sampling.samplers import SAMPLERS
 
     parser = argparse.ArgumentParser(prog="python -m bench.bench_mine", description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="budget 40, one seed, one throughput round")

@@ -5,7 +5,7 @@
 1. mines the ``keep_lane`` policy (it runs into what stands in its lane) with the random sampler
    over the whole shipped bank (:func:`dv2s_gym.mining.miner.mine`, no conversion);
 2. takes the first failure of each scenario (up to ``--failures`` scenarios, in index order: no picking);
-3. converts each one (:func:`dv2s_gym.mining.convert.convert_failure`: failure video, ``bev`` DRA,
+3. converts each one (:func:`dv2s_gym.mining.conversion.convert.convert_failure`: failure video, ``bev`` DRA,
    ``rules`` SG, safety + sandbox, ``k`` reproduction episodes, E2E-SC, bank add or merge) into a new bank,
    timed per stage;
 4. baseline measured in the same run: the plain D-V2S conversion of the same failure videos
@@ -55,8 +55,8 @@ def main(argv=None) -> int:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
 
     t0 = time.perf_counter()
-    from dv2s_gym.mining.conversion_settings import ConversionSettings
-    from dv2s_gym.mining.convert import convert_failure
+    from dv2s_gym.mining.conversion.settings import ConversionSettings
+    from dv2s_gym.mining.conversion.convert import convert_failure
     from dv2s_gym.mining.miner import MineSettings, WorkerSettings, mine
     from dv2s_gym.pipeline.convert import convert_video
     imports = time.perf_counter() - t0

@@ -634,7 +634,7 @@ class RegressEpisode(JsonRecord):
 
 @dataclass(frozen=True, eq=False)
 class HeldOutEpisode(JsonRecord):
-    """One episode of a loop's held-out evaluation (:mod:`dv2s_gym.mining.heldout`): a line of a round's
+    """One episode of a loop's held-out evaluation (:mod:`dv2s_gym.loop.heldout`): a line of a round's
     ``heldout.jsonl``.
 
     The ``role`` the policy was evaluated as (``before``, ``after``, ``control``...), the ``policy``, the bank

@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 from typing import Any, Dict, List, Sequence
 
-from dv2s_gym.mining import loop as loop_module
+from dv2s_gym.loop import run as loop_module
 from dv2s_gym.mining import miner as miner_module
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
@@ -20,7 +20,7 @@ from scenario_bank.bank import Bank, content_hash
 
 def written_report(body: Dict[str, Any]) -> Dict[str, Any]:
     """A loop report's ``body`` with its recommendation, as the loop writes every ``report.json``."""
-    from dv2s_gym.mining.loop_verdict import recommendation
+    from dv2s_gym.loop.verdict import recommendation
 
     return {**body, "recommendation": recommendation(body).to_dict()}
 
@@ -86,7 +86,7 @@ class FakeMiner:
 
 def run_loop(policy: str = "dv2s-ppo", *, miner: Any = None, out: Any = loop_module.DEFAULT_OUT,
              progress: bool = True, log: Any = None, **settings: Any) -> "loop_module.LoopReport":
-    """:func:`dv2s_gym.mining.loop.run_loop` with its :class:`~dv2s_gym.mining.loop.LoopSettings` as keywords (the
+    """:func:`dv2s_gym.loop.run.run_loop` with its :class:`~dv2s_gym.loop.run.LoopSettings` as keywords (the
     tests' shorthand), mining with ``miner`` (a :class:`FakeMiner`) in place of the real miner when given."""
     from unittest import mock
 

@@ -9,10 +9,10 @@ import stat
 
 import pytest
 
-from dv2s_gym.mining import checkpoint_mac
+from dv2s_gym.mining.sampling import checkpoint_mac
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.samplers import SceneSampler
-from dv2s_gym.mining.window import WindowSchedule
+from dv2s_gym.mining.sampling.samplers import SceneSampler
+from dv2s_gym.mining.sampling.window import WindowSchedule
 
 
 class _Planted:

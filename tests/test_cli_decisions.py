@@ -11,7 +11,7 @@ import pytest
 from dv2s_gym.cli import build_parser
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import env_config_option, json_option, json_value
-from dv2s_gym.mining.loop_settings import FINE_TUNE_METHODS
+from dv2s_gym.loop.settings import FINE_TUNE_METHODS
 from dv2s_gym.cli.convert import report_text
 from dv2s_gym.pipeline.convert import (UNPLACED_WARNING, ConversionReport, ScenarioCheck, checks_passed, generated,
                                        placed_nothing)

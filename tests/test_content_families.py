@@ -8,8 +8,8 @@ import warnings
 import pytest
 
 from dv2s_gym.mining.family import scenario_family
-from dv2s_gym.mining.loop import _with_parents
-from dv2s_gym.mining.split import family_of, split_by_family
+from dv2s_gym.loop.run import _with_parents
+from dv2s_gym.loop.split import family_of, split_by_family
 from scenario_bank.bank import Bank
 from scenario_bank.errors import NearDuplicateWarning
 from scenario_bank.families import content_families

@@ -20,7 +20,7 @@ API_PAGES = {  # page -> objects its docstrings must document
                  "scenario_bank.records.EpisodeRecord"],
     "api/policies": ["policies.registry.load_policy", "policies.registry.register_policy"],
     "api/regress": ["dv2s_gym.regress.runner.run_regression"],
-    "api/mining": ["dv2s_gym.mining.miner.mine", "dv2s_gym.mining.loop.run_loop"],
+    "api/mining": ["dv2s_gym.mining.miner.mine", "dv2s_gym.loop.run.run_loop"],
 }
 # Internal history a user cannot follow: issue numbers, work sessions, numbered work periods, met targets,
 # versions of the code a user never had.

@@ -118,7 +118,7 @@ def test_replay_of_a_report_episode_bounds_its_env_config(tmp_path):
 
 
 def test_a_bank_replay_entry_names_a_policy_only_if_it_is_built_in(tmp_path):
-    from dv2s_gym.mining.exact_replay import replay_failure
+    from dv2s_gym.mining.conversion.exact_replay import replay_failure
     from scenario_bank.bank import Bank
     from scenario_bank.records import Provenance
 

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import pytest
 
-from dv2s_gym.mining.conversion_judge import judge_conversion
-from dv2s_gym.mining.conversion_parameters import compare_parameters
-from dv2s_gym.mining.param_meaning import fixed_quantities, quantity_uses
+from dv2s_gym.mining.conversion.judge import judge_conversion
+from dv2s_gym.mining.conversion.parameters import compare_parameters
+from dv2s_gym.mining.conversion.param_meaning import fixed_quantities, quantity_uses
 
 HEAD = """param map = 'highway_straight'
 model scenic.domains.driving.model

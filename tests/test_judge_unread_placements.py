@@ -89,7 +89,7 @@ def test_the_default_lengths_are_the_models():
     """The lengths the judge assumes (``DEFAULT_LENGTHS``) are the classes' in the model scripts compile against."""
     from pathlib import Path
 
-    from dv2s_gym.mining.param_meaning import DEFAULT_LENGTHS
+    from dv2s_gym.mining.conversion.param_meaning import DEFAULT_LENGTHS
     model = (Path(__file__).resolve().parents[1] / "envs" / "scenic_highway" / "model.scenic").read_text()
     for kind in ("Truck", "Bus", "Motorcycle", "Bicycle", "Obstacle"):
         block = model.split(f"class {kind}(", 1)[1].split("\nclass ", 1)[0]

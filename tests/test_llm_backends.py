@@ -210,7 +210,7 @@ def test_an_llm_config_is_a_record_whose_keys_are_checked_where_it_enters(monkey
     import argparse
 
     from dv2s_gym.cli.inputs import llm_config
-    from dv2s_gym.mining.conversion_settings import ConversionSettings
+    from dv2s_gym.mining.conversion.settings import ConversionSettings
     from dv2s_gym.pipeline.convert import ConvertSettings
 
     given = argparse.Namespace(base_url="http://localhost:1/v1", model="m", api_key=None)

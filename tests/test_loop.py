@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from scenario_bank.run_identity import RunIdentityError
-from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
-from dv2s_gym.mining import loop as loop_module
-from dv2s_gym.mining.loop import LoopError, fine_tune_weights
-from dv2s_gym.mining.loop_record import HeldOutComparison, RoundRecord
-from dv2s_gym.mining.split import family_of, split_by_family
+from dv2s_gym.loop.heldout import HeldOutStore, evaluate_heldout, paired_summary
+from dv2s_gym.loop import run as loop_module
+from dv2s_gym.loop.run import LoopError, fine_tune_weights
+from dv2s_gym.loop.record import HeldOutComparison, RoundRecord
+from dv2s_gym.loop.split import family_of, split_by_family
 from dv2s_gym.workers.settings import WorkerSettings
 from cli_helpers import one_line_error, run
 from loop_helpers import FakeMiner, run_loop, written_report
@@ -93,7 +93,7 @@ def test_family_split_keeps_every_family_on_its_side_across_two_rounds(seed):
 
 
 def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
-    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.loop.run import heldout_comparison
 
     def records(outcomes):
         return [{"scenario": f"s{i % 4}", "seed": i, "failed": f, "error": None} for i, f in enumerate(outcomes)]
@@ -106,7 +106,7 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
     assert few["relative_drop"] is None and few["mcnemar_p"] is None and few["after"]["k"] == 8
     three = heldout_comparison(start, tuned, None, min_episodes=20, families={**two, "s2": "fam_z"}, min_families=3)
     assert "underpowered" not in three and three["heldout_families"] == 3 and three["mcnemar_p"] < 0.01
-    from dv2s_gym.mining.loop_report import _heldout_lines, _round_row
+    from dv2s_gym.loop.report import _heldout_lines, _round_row
 
     assert "40 pairs from 2 families (4 scenarios)" in _heldout_lines(few)[1]
     assert _round_row(RoundRecord.from_dict({"round": 1, "steps": {"after": few}}))["drop"] == \
@@ -117,8 +117,8 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
 def test_the_heldout_report_names_entries_the_starting_policy_mostly_passes():
     """A kept failure is exact at its own seed only: held out at other seeds, the start may pass most of it, and
     the report says so beside the table instead of leaving the reader to count."""
-    from dv2s_gym.mining.loop import heldout_comparison
-    from dv2s_gym.mining.loop_report import _heldout_lines
+    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.report import _heldout_lines
 
     def records(failed_by_scenario):
         return [{"scenario": name, "seed": seed, "failed": seed < failed, "error": None}
@@ -133,8 +133,8 @@ def test_the_heldout_report_names_entries_the_starting_policy_mostly_passes():
 
 
 def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_of_a_family_are_not_independent():
-    from dv2s_gym.mining.loop import heldout_comparison
-    from dv2s_gym.mining.loop_report import _heldout_lines
+    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.report import _heldout_lines
 
     families, start, tuned = {}, [], []
 
@@ -161,7 +161,7 @@ def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_
 
 
 def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
-    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.loop.run import heldout_comparison
 
     def records(outcomes):
         return [{"scenario": f"s{i % 2}", "seed": i, "failed": f, "error": None} for i, f in enumerate(outcomes)]
@@ -185,7 +185,7 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     tuned[0]["failure"] = {"type": "stall"}
     kinds = heldout_comparison(start, tuned, control, min_episodes=1)["failure_types"]
     assert kinds == {"start": {"stall": 1, "collision": 1}, "fine_tuned": {"stall": 1}, "control": {}}
-    from dv2s_gym.mining.loop_report import render_markdown
+    from dv2s_gym.loop.report import render_markdown
 
     start[2]["failure"] = {"type": "off_road"}
     after = heldout_comparison(start, tuned, control, min_episodes=1)
@@ -200,8 +200,8 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
 def test_the_control_test_needs_the_minimums_and_the_floor_on_its_own_pairs():
     """A control that errored on all but one episode per family: 20 tested pairs against the start, 4 against the
     control. The control test does not run and the round is not accepted."""
-    from dv2s_gym.mining.loop import heldout_comparison
-    from dv2s_gym.mining.loop_verdict import judge_round
+    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.verdict import judge_round
 
     families = {f"F{i}_replay": f"F{i}" for i in range(4)}
     before, after, control = [], [], []
@@ -396,7 +396,7 @@ def test_loop_refuses_a_policy_it_cannot_fine_tune(tmp_path):
 
 @pytest.mark.parametrize("given, expected", [("0", 0), ("3", 3), ("all", None)])
 def test_cli_cluster_counts_read_0_as_none_and_all_as_every_cluster(tmp_path, capsys, monkeypatch, given, expected):
-    import dv2s_gym.mining.loop as loop_module
+    import dv2s_gym.loop.run as loop_module
 
     seen = {}
 
@@ -438,7 +438,7 @@ class _StandIns:
         import dataclasses
         import shutil
 
-        import dv2s_gym.mining.heldout as heldout
+        import dv2s_gym.loop.heldout as heldout
         import dv2s_gym.regress.runner as runner
         import policies.training as training
 
@@ -549,7 +549,7 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     untouched = steps["untouched"]
     assert set(untouched["policies"]) == {"start", "fine_tuned", "control"}
     first, second = stand.regressions[:2]  # the untouched set: never the loop's bank
-    assert first["bank_dir"] == second["bank_dir"] == str(__import__("dv2s_gym.mining.loop", fromlist=["x"])
+    assert first["bank_dir"] == second["bank_dir"] == str(__import__("dv2s_gym.loop.run", fromlist=["x"])
                                                            .UNTOUCHED_BANK)
     assert second["candidate"] == report.rounds[0]["control_policy"] and second["baseline_role"] == "candidate"
     assert any("[6/9] control" in line for line in lines)
@@ -558,7 +558,7 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     assert "control arm" in markdown and "untouched scenario set" in markdown and "split by family" in markdown
     assert markdown.count("held-out family's parent") == len(split["held_out_families"])
     # the HTML shows a kept scenario's failure clip where its bank entry has one
-    from dv2s_gym.mining.loop_report import write_loop_reports
+    from dv2s_gym.loop.report import write_loop_reports
 
     assert "<video" not in report.paths["html"].read_text()
     held = split["held_out"][0]
@@ -608,7 +608,7 @@ def test_reference_gate_counts_failures_and_errors_and_names_families_left_out_e
     assert (gate["failed"], gate["errored"]) == (2, 1)
     assert gate["excluded_families"] == ["A"]  # B keeps a passed episode
     assert gate["by_scenario"]["a1"]["failures"] == {"stall": 1, "error": 1}
-    from dv2s_gym.mining.loop_report import reference_gate_text
+    from dv2s_gym.loop.report import reference_gate_text
 
     text = reference_gate_text(gate)
     assert "3 of 4 held-out episodes left out" in text and "2 failed, 1 errored" in text and "entirely: A" in text
@@ -641,7 +641,7 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
     that family: neither arm trains on it, and the arm records root families only."""
     import shutil
 
-    from dv2s_gym.mining import loop as loop_module
+    from dv2s_gym.loop import run as loop_module
     from scenario_bank.bank import Bank
 
     shipped = Bank()
@@ -686,7 +686,7 @@ def test_dagger_beta_decay_is_a_checked_recorded_setting_both_dagger_arms_use(tm
     import policies.imitation as imitation
     from dv2s_gym.cli import build_parser
     from dv2s_gym.cli.loop import loop_settings
-    from dv2s_gym.mining.loop_settings import LoopSettings
+    from dv2s_gym.loop.settings import LoopSettings
 
     for bad in (-0.1, 1.5, float("nan"), "0", True):
         with pytest.raises(LoopError, match="--dagger-beta-decay"):
@@ -766,7 +766,7 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
 def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences():
     from pathlib import Path
 
-    from dv2s_gym.mining.loop import UNTOUCHED_BANK
+    from dv2s_gym.loop.run import UNTOUCHED_BANK
     from scenario_bank.bank import Bank
 
     bank = Bank(UNTOUCHED_BANK)
@@ -822,7 +822,7 @@ def test_each_round_mines_with_a_derived_seed_and_tells_the_miner_the_loop_s_own
 
 
 def test_a_round_policy_read_back_from_loop_json_must_be_that_rounds_own_checkpoint(tmp_path):
-    from dv2s_gym.mining.loop import _round_spec
+    from dv2s_gym.loop.run import _round_spec
 
     folder = tmp_path / "round_1" / "policy"
     folder.mkdir(parents=True)
@@ -836,7 +836,7 @@ def test_a_round_policy_read_back_from_loop_json_must_be_that_rounds_own_checkpo
 
 # --------------------------------------------------------------------------- exact replays as mined scenarios
 def test_mined_entries_include_the_exact_replays_with_their_parent(tmp_path):
-    from dv2s_gym.mining.loop import mined_entries
+    from dv2s_gym.loop.run import mined_entries
 
     run_dir = tmp_path / "mine"
     run_dir.mkdir()
@@ -973,7 +973,7 @@ def test_a_loop_json_of_the_wrong_structure_is_refused_in_one_line(tmp_path, con
 def test_the_held_out_split_groups_entries_by_the_family_they_were_clustered_by(tmp_path):
     """An entry mined from a mined entry belongs to the first scenario of its provenance chain, as in clustering."""
     from dv2s_gym.mining.family import scenario_family
-    from dv2s_gym.mining.loop import _with_parents
+    from dv2s_gym.loop.run import _with_parents
     from loop_helpers import add_mined_copy
 
     bank = tmp_path / "bank"
@@ -1048,7 +1048,7 @@ def test_an_inconclusive_regression_test_leaves_the_policy_not_accepted(tmp_path
 def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, monkeypatch):
     """Round 1 regresses (REJECTED): round 2 starts from the starting policy; round 2 passes (ACCEPTED): round 3
     starts from round 2's policy; round 3 cannot tell (NOT ACCEPTED): round 2's stays the policy to use."""
-    from dv2s_gym.mining import loop_report
+    from dv2s_gym.loop import report as loop_report
 
     stand = _StandIns(monkeypatch)
     _regression_verdicts(monkeypatch, {"round_1": "FAIL", "round_2": "PASS", "round_3": "INCONCLUSIVE"})
@@ -1088,7 +1088,7 @@ def test_the_next_round_follows_the_policy_to_use_when_the_rounds_are_judged_aga
     """Rounds 1 and 2 each pass against the policy they started from. Judged over both rounds against the starting
     policy (as the report judges them), the fine-tuned policy is either rejected (round 3 starts from the starting
     policy, the policy to use) or not (round 3 starts from round 2's fine-tuned policy, the policy to use)."""
-    from dv2s_gym.mining import loop_report
+    from dv2s_gym.loop import report as loop_report
 
     _StandIns(monkeypatch)
     _regression_verdicts(monkeypatch, {"round_1": "PASS", "round_2": "PASS", "round_3": "PASS"})
@@ -1132,7 +1132,7 @@ def test_a_resume_refuses_other_training_envs_or_another_held_out_family_minimum
 def test_errored_episodes_are_counted_per_step_and_named_in_the_log_the_record_and_the_reports(tmp_path, monkeypatch):
     """A scene the sampler cannot produce is an errored episode, counted in no rate: each step that had some says
     how many, in which scenarios and why, in the log, ``loop.json`` and both reports."""
-    import dv2s_gym.mining.heldout as heldout
+    import dv2s_gym.loop.heldout as heldout
     import dv2s_gym.regress.runner as runner
 
     _StandIns(monkeypatch)
@@ -1199,14 +1199,14 @@ def test_errored_episodes_are_counted_per_step_and_named_in_the_log_the_record_a
 
 
 def report_summary(report):
-    from dv2s_gym.mining.loop_report import round_summary
+    from dv2s_gym.loop.report import round_summary
 
     return round_summary(report.rounds[0])
 
 
 def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected_for(tmp_path):
-    from dv2s_gym.mining.loop import _mining_summary
-    from dv2s_gym.mining.loop_report import render_markdown
+    from dv2s_gym.loop.run import _mining_summary
+    from dv2s_gym.loop.report import render_markdown
 
     reasons = ["actors: the failure's scene has 2 actors (car 2), the new scenario's 1 actor (car 1): 1 car fewer",
                "parameters: the new scenario's ranges do not contain the failing values: ego_speed = 12.9 outside 8..12"]
@@ -1224,8 +1224,8 @@ def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected
 
 
 def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_minimum():
-    from dv2s_gym.mining.loop import heldout_comparison
-    from dv2s_gym.mining.loop_verdict import judge_round
+    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.verdict import judge_round
 
     families = {"a1": "famA", "b1": "famB", "c1": "famC"}
     start = [{"scenario": s, "seed": seed, "failed": s == "c1" and seed < 2, "error": None}
@@ -1240,7 +1240,7 @@ def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_
     record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
                                                             "regress": {"verdict": "PASS", "reason": "r"}}}
     assert judge_round(record)["verdict"] == "NOT ACCEPTED"
-    from dv2s_gym.mining.loop_report import _heldout_lines
+    from dv2s_gym.loop.report import _heldout_lines
 
     assert "from 2 families (3 scenarios, 1 more with no tested pair)" in "\n".join(_heldout_lines(summary))
     # with every family tested the same round is judged, and the sentence gives the pairs beside p
@@ -1253,8 +1253,8 @@ def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_
 def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_steps_test(tmp_path, monkeypatch):
     """The `after` step reads the starting policy's held-out episodes back from the store: one that errored in the
     `before` step is not run again there, so its pair is in no rate or test, as the report says."""
-    import dv2s_gym.mining.heldout as heldout
-    from dv2s_gym.mining.loop import errored_episodes, heldout_comparison
+    import dv2s_gym.loop.heldout as heldout
+    from dv2s_gym.loop.run import errored_episodes, heldout_comparison
     from scenario_bank.records import HeldOutEpisode
 
     runs = []
@@ -1283,8 +1283,8 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
 def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_frequent_first():
     """Errored episodes of one scenario with seven distinct messages: all are kept with their counts in the record,
     the most frequent first; the log line and the report list the five most frequent and count the rest."""
-    from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
-    from dv2s_gym.mining.loop_report import render_markdown
+    from dv2s_gym.loop.errored import errored_episodes, merged_messages, messages_text
+    from dv2s_gym.loop.report import render_markdown
 
     errors = (["scene not sampled"] + ["worker hung"] * 3 + ["worker crashed\nTraceback ..."] * 2
               + ["a", "b", "c", "d"] + ["c"])
@@ -1315,7 +1315,7 @@ def test_merging_the_steps_error_messages_counts_each_distinct_message_once():
     """Two steps of one scenario: seven distinct messages in the first (one twice), and in the second one of those
     beyond its five most frequent. Merged, there are still seven distinct messages: five listed, two more (not
     three: the one the second step repeats is the same message), and its count adds up."""
-    from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
+    from dv2s_gym.loop.errored import errored_episodes, merged_messages, messages_text
 
     first = errored_episodes([{"scenario": "s1", "error": f"scene rejected by requirement {i}"} for i in range(7)]
                              + [{"scenario": "s1", "error": "scene rejected by requirement 0"}])

@@ -10,8 +10,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dv2s_gym.mining.loop_record import RecordedLoopSettings, RoundRecord
-from dv2s_gym.mining.loop_report import final_vs_start, write_loop_reports
+from dv2s_gym.loop.record import RecordedLoopSettings, RoundRecord
+from dv2s_gym.loop.report import final_vs_start, write_loop_reports
 from dv2s_gym.regress.report import build_report, write_json
 
 NAMES = ["scenario_a", "scenario_b"]
@@ -87,7 +87,7 @@ def test_a_changed_starting_bank_is_not_compared(tmp_path):
 
 def _accepted(record: dict) -> dict:
     """``record`` as a round whose own tests accepted its policy (regression PASS, held-out no worse)."""
-    from dv2s_gym.mining.loop_verdict import heldout_worse
+    from dv2s_gym.loop.verdict import heldout_worse
 
     fine = {"f1": {"both_fail": 0, "candidate_only": 0, "baseline_only": 2, "neither": 28},
             "f2": {"both_fail": 0, "candidate_only": 0, "baseline_only": 2, "neither": 28}}
@@ -113,7 +113,7 @@ def _state(rounds: list):
 def test_the_next_round_and_the_report_never_use_a_policy_the_cross_round_check_rejected(tmp_path):
     from types import SimpleNamespace
 
-    from dv2s_gym.mining import loop as loop_module
+    from dv2s_gym.loop import run as loop_module
 
     body = _loop(tmp_path, 2)
     rounds = [_accepted(record) for record in body["rounds"]]  # round 2 passes against P1 but P2 FAILs against P0
@@ -135,8 +135,8 @@ def test_the_next_round_and_the_report_never_use_a_policy_the_cross_round_check_
 def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_directory(tmp_path, monkeypatch):
     from types import SimpleNamespace
 
-    from dv2s_gym.mining import loop as loop_module
-    from dv2s_gym.mining.loop_verdict import recommendation
+    from dv2s_gym.loop import run as loop_module
+    from dv2s_gym.loop.verdict import recommendation
 
     monkeypatch.chdir(tmp_path)
     folder = tmp_path / "out" / "loop"
@@ -165,7 +165,7 @@ def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_direct
 
 
 def test_the_loop_records_regression_report_paths_that_do_not_depend_on_the_working_directory(tmp_path, monkeypatch):
-    from dv2s_gym.mining.loop import _regress_summary
+    from dv2s_gym.loop.run import _regress_summary
 
     monkeypatch.chdir(tmp_path)
     summary = _regress_summary({"verdict": "PASS"}, Path("out/loop/round_1/regress/report.json"))
@@ -176,7 +176,7 @@ def test_a_round_begun_from_another_policy_than_the_rounds_before_it_recommend_i
     import pytest
     from types import SimpleNamespace
 
-    from dv2s_gym.mining import loop as loop_module
+    from dv2s_gym.loop import run as loop_module
 
     record = {"round": 2, "policy": "p0", "steps": {"mine": {"kept": []}}}  # begun from p0 ...
     loop = SimpleNamespace(state=SimpleNamespace(round=lambda number: RoundRecord.from_dict(record)), out=tmp_path)

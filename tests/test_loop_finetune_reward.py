@@ -12,7 +12,7 @@ import pytest
 import policies.training as training
 from cli_helpers import one_line_error, run
 from scenario_bank.run_identity import RunIdentityError
-from dv2s_gym.mining.loop import DEFAULTS, LoopError
+from dv2s_gym.loop.run import DEFAULTS, LoopError
 from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT
@@ -80,7 +80,7 @@ def _stub_fine_tune(calls):
 
 
 def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(tmp_path, monkeypatch):
-    import dv2s_gym.mining.heldout as heldout
+    import dv2s_gym.loop.heldout as heldout
     import dv2s_gym.regress.runner as runner
 
     fine_tunes, evaluations, regressions = [], [], []

@@ -10,9 +10,9 @@ import json
 
 import pytest
 
-from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.conversion_replay import replay_failure_entry
-from dv2s_gym.mining.exact_replay import replay_failure
+from dv2s_gym.mining.conversion.settings import ConversionSettings
+from dv2s_gym.mining.conversion.replay import replay_failure_entry
+from dv2s_gym.mining.conversion.exact_replay import replay_failure
 from scenario_bank.bank import Bank, Sidecar
 from scenario_bank.records import EpisodeRecord
 from test_mining_convert import SCENARIO, make_record, midpoint
@@ -55,7 +55,7 @@ def test_a_scene_the_reference_driver_failed_too_gets_no_replay_entry(record, tm
 
 @pytest.mark.slow
 def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(record, tmp_path):
-    from dv2s_gym.mining.exact_replay import replay_versions
+    from dv2s_gym.mining.conversion.exact_replay import replay_versions
     from dv2s_gym.regress.identity import dv2s_sources_sha256
     from policies.run_identity import installed_version
     from envs.trace import TRACE_VERSION
@@ -116,7 +116,7 @@ def test_every_cluster_of_a_mining_run_gets_its_replay_once(tmp_path):
     from dv2s_gym.mining.cluster import group
     from dv2s_gym.mining.miner import read_records
     from mining_helpers import mine
-    from dv2s_gym.mining.replays import REPLAYS_FILE, replay_clusters, replay_entries
+    from dv2s_gym.loop.replays import REPLAYS_FILE, replay_clusters, replay_entries
 
     run_dir = tmp_path / "run"
     mine("keep_lane", out=run_dir, budget=4, sampler="random", scenarios=[SCENARIO], workers=1, reference=None,
@@ -161,9 +161,9 @@ def test_exact_replays_take_the_families_in_turn_largest_cluster_first(tmp_path,
     """Family ``a`` has the three largest clusters (5, 4 and 3 failures), ``b`` one of 2 and ``c`` one of 1: three
     replays are one cluster of each family, not all three of ``a``; the rest follow family by family, and a resumed
     call goes on in the same order."""
-    import dv2s_gym.mining.convert as convert
+    import dv2s_gym.mining.conversion.convert as convert
     from dv2s_gym.mining.cluster import group
-    from dv2s_gym.mining.replays import REPLAYS_FILE, replay_clusters
+    from dv2s_gym.loop.replays import REPLAYS_FILE, replay_clusters
 
     sizes = [("a", "car", 5), ("a", "truck", 4), ("a", "bicycle", 3), ("b", "car", 2), ("c", "car", 1)]
     records, index = [], 0
@@ -192,7 +192,7 @@ def test_exact_replays_take_the_families_in_turn_largest_cluster_first(tmp_path,
     rows = replay_clusters(run_dir, bank_dir=tmp_path / "bank", progress=False)
     assert [r["cluster"] for r in rows][4:] == [cluster["a", "bicycle"]]
     assert len((run_dir / REPLAYS_FILE).read_text().splitlines()) == len(replayed) == 5
-    from dv2s_gym.mining.replays import replay_order
+    from dv2s_gym.loop.replays import replay_order
 
     # deterministic, and the representative is the failure a conversion would take (lowest robustness)
     typed = [EpisodeRecord.from_dict(r) for r in records]
@@ -206,7 +206,7 @@ def test_an_exact_replay_is_kept_only_of_a_scene_the_reference_driver_passed(tmp
     less severe); the loop counts the stall as a failure too, so that cluster gets no exact replay, and the mining
     summary counts it apart. A reference near miss where the policy collided still counts as passed."""
     from dv2s_gym.mining.cluster import group
-    from dv2s_gym.mining.replays import replay_order
+    from dv2s_gym.loop.replays import replay_order
 
     def failing(index, family, kind, reference):
         record = _failed(index, family, "pedestrian")
@@ -222,8 +222,8 @@ def test_an_exact_replay_is_kept_only_of_a_scene_the_reference_driver_passed(tmp
     records = [stalled, passed, near, unchecked]
     order = replay_order(group([EpisodeRecord.from_dict(r) for r in records]))
     assert sorted(r["index"] for _, r in order) == [1, 2, 3]  # no replay of the scene the reference stalled in
-    from dv2s_gym.mining.loop import _mining_summary
-    from dv2s_gym.mining.replays import reference_passed
+    from dv2s_gym.loop.run import _mining_summary
+    from dv2s_gym.loop.replays import reference_passed
 
     assert not reference_passed(stalled)
     assert reference_passed(passed) and reference_passed(near) and reference_passed(unchecked)

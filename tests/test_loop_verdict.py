@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from dv2s_gym.mining.loop_verdict import FAMILY_RULE, heldout_worse, recommendation
+from dv2s_gym.loop.verdict import FAMILY_RULE, heldout_worse, recommendation
 from loop_helpers import written_report
 
 
@@ -105,7 +105,7 @@ def _episodes(failing):
 
 
 def _judged(before, after, control, regress="PASS", **minimums):
-    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.loop.run import heldout_comparison
 
     families = {f"f{f}_s{s}": f"family_{f}" for f in range(4) for s in range(2)}
     summary = heldout_comparison(_episodes(before), _episodes(after), None if control is None else _episodes(control),
@@ -179,7 +179,7 @@ def test_a_policy_the_cross_round_check_rejected_is_never_the_policy_to_use():
 
 # --------------------------------------------------------------------------- the evidence floor
 def test_the_evidence_floor_is_the_fewest_pairs_an_exact_mcnemar_test_can_be_significant_with():
-    from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR, fewest_significant_pairs
+    from dv2s_gym.loop.verdict import EVIDENCE_FLOOR, fewest_significant_pairs
     from dv2s_gym.regress.stats import PairedTable, mcnemar_exact
 
     assert EVIDENCE_FLOOR == fewest_significant_pairs(0.05) == 6
@@ -190,7 +190,7 @@ def test_the_evidence_floor_is_the_fewest_pairs_an_exact_mcnemar_test_can_be_sig
 def test_minimums_of_zero_do_not_let_a_single_held_out_pair_be_judged():
     """``--min-heldout-episodes 0 --min-heldout-families 0``: one tested pair (both policies pass) is too small to
     judge, not an ACCEPTED policy; the tests do not run and the verdict says why."""
-    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.loop.run import heldout_comparison
 
     one = [{"scenario": "f0_s0", "seed": 0, "failed": False, "error": None}]
     summary = heldout_comparison(one, one, one, min_episodes=0, families={"f0_s0": "family_0"}, min_families=0)
@@ -210,10 +210,10 @@ def test_minimums_of_zero_do_not_let_a_single_held_out_pair_be_judged():
 
 
 def test_the_recommendation_is_a_record_written_as_a_json_object_and_every_report_has_one(tmp_path):
-    from dv2s_gym.mining.loop import LoopReport
-    from dv2s_gym.mining.loop_report import render_markdown
-    from dv2s_gym.mining.loop_settings import LoopError
-    from dv2s_gym.mining.loop_verdict import Recommendation
+    from dv2s_gym.loop.run import LoopReport
+    from dv2s_gym.loop.report import render_markdown
+    from dv2s_gym.loop.settings import LoopError
+    from dv2s_gym.loop.verdict import Recommendation
 
     body = _report(_round(1, "FAIL"), _round(2, "PASS"))
     verdict = recommendation(body)
@@ -236,8 +236,8 @@ def test_the_recommendation_is_a_record_written_as_a_json_object_and_every_repor
 
 
 def test_a_minimum_that_can_never_give_evidence_is_flagged_in_the_help_the_log_and_the_report():
-    from dv2s_gym.mining.loop_report import render_markdown
-    from dv2s_gym.mining.loop_verdict import evidence_floor_note
+    from dv2s_gym.loop.report import render_markdown
+    from dv2s_gym.loop.verdict import evidence_floor_note
 
     assert evidence_floor_note(20, 3) is None and evidence_floor_note(6, 1) is None
     note = evidence_floor_note(0, 0)
@@ -276,14 +276,14 @@ def test_a_harm_in_one_family_the_gate_calls_inconclusive_is_not_accepted():
     assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "heldout_families_vs_start"
     assert "in family family_3 the fine-tuned policy failed 3 of 8 pairs" in verdict.reason
     assert "Holm" in verdict.reason and verdict.policy == "dv2s-ppo"
-    from dv2s_gym.mining.loop_report import render_markdown
+    from dv2s_gym.loop.report import render_markdown
 
     record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
               "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
     markdown = render_markdown(written_report(_report(record)))
     assert "**harm not ruled out in family_3**" in markdown and "family_3 +37.5 pp" in markdown
     # the same round judged at a margin the harm stays within is accepted
-    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.loop.run import heldout_comparison
 
     families = {f"f{f}_s{s}": f"family_{f}" for f in range(4) for s in range(2)}
     wide = heldout_comparison(_episodes(lambda f, s, seed: False), _episodes(after), None, min_episodes=8,
@@ -314,7 +314,7 @@ def test_a_round_no_worse_in_any_family_is_still_accepted():
 
 
 def test_non_inferiority_p_is_below_the_level_exactly_when_the_interval_is_below_the_margin():
-    from dv2s_gym.mining.loop_verdict import family_harm, non_inferiority_p
+    from dv2s_gym.loop.verdict import family_harm, non_inferiority_p
     from dv2s_gym.regress.stats import PairedTable, paired_difference_interval
 
     for table in (PairedTable(neither=400), PairedTable(neither=150), PairedTable(both_fail=5, baseline_only=3,
@@ -334,7 +334,7 @@ def test_non_inferiority_p_is_below_the_level_exactly_when_the_interval_is_below
 def _accepted_round():
     """A round every test accepts: 20 held-out pairs from 4 families, the fine-tuned policy failing none the start
     or the control passed."""
-    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.loop.run import heldout_comparison
 
     families = {f"F{i}_replay": f"F{i}" for i in range(4)}
     before = [{"scenario": n, "seed": s, "failed": True, "error": None} for n in families for s in range(5)]
@@ -357,8 +357,8 @@ def test_a_fine_tuned_policy_that_fails_on_the_untouched_set_is_not_accepted():
 
 
 def test_an_untouched_set_the_start_failed_entirely_is_called_vacuous_in_the_verdict_and_the_report():
-    from dv2s_gym.mining.loop_record import UntouchedComparison
-    from dv2s_gym.mining.loop_report import _untouched_lines
+    from dv2s_gym.loop.record import UntouchedComparison
+    from dv2s_gym.loop.report import _untouched_lines
 
     def policies(start_failed: int) -> dict:
         rate = {"value": start_failed / 6, "low": 0.0, "high": 1.0}
@@ -401,7 +401,7 @@ def test_loop_help_names_the_family_harm_rule_and_the_untouched_set(capsys):
 def _one_family_round(fine_tuned_only, *, pairs=50, other_only=0, margin=None):
     """A round with one held-out family ``F`` of ``pairs`` paired episodes and no control: the fine-tuned policy fails
     the first ``fine_tuned_only`` episodes alone, the starting policy the next ``other_only`` alone."""
-    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.loop.run import heldout_comparison
 
     before = [{"scenario": "F_replay", "seed": s, "failed": fine_tuned_only <= s < fine_tuned_only + other_only,
                "error": None} for s in range(pairs)]
@@ -417,7 +417,7 @@ def test_a_family_exactly_at_the_margin_is_not_harmed_and_one_pair_more_is(pairs
     """The default margin is 2 pp: one fine-tuned-only failure in 50 pairs is +2 pp, exactly the margin, and is no
     harm (the rule is "worse by more than the margin"); a second one (+4 pp) is. The same at margins 10 pp (1 of 10
     pairs) and 15 pp (3 of 20)."""
-    from dv2s_gym.mining.loop_settings import DEFAULTS
+    from dv2s_gym.loop.settings import DEFAULTS
 
     limit = DEFAULTS["margin"] if margin is None else margin
     at = round(limit * pairs)
@@ -442,8 +442,8 @@ def test_family_non_inferiority_is_shown_at_one_sided_2_5_percent_after_holm_and
     """10 pairs, the starting policy failing alone 3 times (-30 pp): Holm-adjusted one-sided p is 0.031, between
     0.025 and 0.05, so non-inferiority at the margin is not shown (it would be at one-sided 0.05); 40 such pairs
     show it. The report's line on the family says which."""
-    from dv2s_gym.mining.loop_report import render_markdown
-    from dv2s_gym.mining.loop_verdict import family_harm, non_inferiority_p
+    from dv2s_gym.loop.report import render_markdown
+    from dv2s_gym.loop.verdict import family_harm, non_inferiority_p
     from dv2s_gym.regress.stats import PairedTable, paired_difference_interval
 
     record = _one_family_round(0, pairs=10, other_only=3)
@@ -480,7 +480,7 @@ def test_the_point_estimate_alone_decides_harm_and_the_non_inferiority_test_neve
     """Over every paired table of up to 8 pairs and several margins: a family is harmed exactly when its difference
     exceeds the margin, and a harmed family never shows non-inferiority (its p-value is 1), so reporting the test
     beside the estimate changes no verdict."""
-    from dv2s_gym.mining.loop_verdict import FAMILY_RULE, family_harm, non_inferiority_p
+    from dv2s_gym.loop.verdict import FAMILY_RULE, family_harm, non_inferiority_p
     from dv2s_gym.regress.stats import PairedTable
 
     other = PairedTable(candidate_only=1, neither=1)  # a second family for Holm to adjust over
@@ -534,7 +534,7 @@ def test_the_held_out_gate_has_no_margin_and_says_against_whom_and_where():
 
 
 def test_a_round_is_judged_once_it_fine_tuned_or_named_a_policy():
-    from dv2s_gym.mining.loop_verdict import judge_round
+    from dv2s_gym.loop.verdict import judge_round
 
     assert judge_round({"round": 1, "steps": {"mine": {}}}) is None and judge_round({"round": 1}) is None
     for record in ({"round": 1, "steps": {"fine_tune": {}}}, {"round": 1, "new_policy": "ppo:x", "steps": {}}):
@@ -543,7 +543,7 @@ def test_a_round_is_judged_once_it_fine_tuned_or_named_a_policy():
 
 
 def test_a_held_out_test_that_did_not_run_says_which_and_why():
-    from dv2s_gym.mining.loop_verdict import judge_round
+    from dv2s_gym.loop.verdict import judge_round
 
     tested = _held_out_test()
     cases = [  # (after, decided_by, the reason's words)
@@ -611,7 +611,7 @@ def test_the_candidate_is_the_rounds_own_policy_and_only_a_not_accepted_round_is
 
 def test_family_non_inferiority_at_the_edge_of_one_sided_2_5_percent():
     """55 pairs, the other policy failing alone 3 times: p = 0.02492, shown; 58 pairs with 7 and 2: p = 0.02501, not."""
-    from dv2s_gym.mining.loop_verdict import family_harm
+    from dv2s_gym.loop.verdict import family_harm
     from dv2s_gym.regress.stats import PairedTable
 
     below = family_harm({"f": PairedTable(baseline_only=3, neither=52)}, 0.02)["families"]["f"]

@@ -87,7 +87,7 @@ def test_an_unknown_scenario_says_what_mine_takes_and_what_the_bank_holds(tmp_pa
 
 def test_the_mining_api_refuses_an_unknown_scenario_the_same_way():
     from scenario_bank import UnknownScenarioError
-    from dv2s_gym.mining.space import SceneSpace
+    from dv2s_gym.mining.sampling.space import SceneSpace
 
     with pytest.raises(UnknownScenarioError, match=r"dv2s mine --scenarios takes bank names.*Did you mean "
                                                    r"'highway_lead_vehicle_brakes'"):

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-import dv2s_gym.mining.space as space_module
+import dv2s_gym.mining.sampling.space as space_module
 from dv2s_gym.mining.miner import _recorded, mine
 from dv2s_gym.mining.settings import MineSettings
 from scenario_bank.run_identity import RunIdentityError

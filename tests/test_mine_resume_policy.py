@@ -8,7 +8,7 @@ import zipfile
 
 import pytest
 
-import dv2s_gym.mining.space as space_module
+import dv2s_gym.mining.sampling.space as space_module
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import _recorded, mine
 from dv2s_gym.mining.settings import MineSettings

@@ -6,13 +6,13 @@ from __future__ import annotations
 import pytest
 
 from dv2s_gym.cli import build_parser
-from dv2s_gym.mining import samplers
+from dv2s_gym.mining.sampling import samplers
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.rate import failure_rate
-from dv2s_gym.mining.samplers import (SAMPLER_OPTIONS, SAMPLERS, SamplerRecord, default_feedback, is_adaptive,
+from dv2s_gym.mining.sampling.rate import failure_rate
+from dv2s_gym.mining.sampling.samplers import (SAMPLER_OPTIONS, SAMPLERS, SamplerRecord, default_feedback, is_adaptive,
                                       is_uniform, make_sampler, register_sampler, registered_samplers, sampler_params)
 from dv2s_gym.mining.settings import MineSettings
-from dv2s_gym.mining.space import SceneSpace
+from dv2s_gym.mining.sampling.space import SceneSpace
 from scenario_bank.records import EpisodeRecord
 
 

@@ -1,4 +1,4 @@
-"""The split sampler (dv2s_gym/mining/split_sampler.py): a VerifAI sampler over which scenario, one VerifAI
+"""The split sampler (dv2s_gym/mining/sampling/split_sampler.py): a VerifAI sampler over which scenario, one VerifAI
 sampler per scenario over its parameters; deterministic, resumable, adaptive."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from dv2s_gym.mining.cluster import region_of
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import read_records
 from mining_helpers import mine
-from dv2s_gym.mining.samplers import SPLIT, SceneSampler, is_adaptive, make_sampler
-from dv2s_gym.mining.space import SceneSpace
-from dv2s_gym.mining.split_sampler import scenario_dimensions
+from dv2s_gym.mining.sampling.samplers import SPLIT, SceneSampler, is_adaptive, make_sampler
+from dv2s_gym.mining.sampling.space import SceneSpace
+from dv2s_gym.mining.sampling.split_sampler import scenario_dimensions
 from mining_helpers import global_draws, mine_killed_after, seed_globals_and_peek
 
 BRAKES = "highway_lead_vehicle_brakes"

@@ -1,4 +1,4 @@
-"""Streamed mining of adaptive samplers: the sliding-window schedule (dv2s_gym/mining/window.py), the local
+"""Streamed mining of adaptive samplers: the sliding-window schedule (dv2s_gym/mining/sampling/window.py), the local
 pool's ``run(..., more=)`` and resuming a streamed run."""
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ import pytest
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import episode_seed, read_records
 from mining_helpers import mine
-from dv2s_gym.mining.samplers import make_sampler
-from dv2s_gym.mining.space import SceneSpace
+from dv2s_gym.mining.sampling.samplers import make_sampler
+from dv2s_gym.mining.sampling.space import SceneSpace
 from dv2s_gym.mining.settings import DEFAULT_BATCH, MineSettings
 from mining_helpers import mine_killed_after
-from dv2s_gym.mining.window import WindowSchedule
+from dv2s_gym.mining.sampling.window import WindowSchedule
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.pool import LocalBackend, _ScenarioQueue
 

@@ -11,7 +11,7 @@ import pytest
 
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
 
-from dv2s_gym.mining.failure_video import ACTOR_MARGIN, VIDEO_CONFIG, clip_camera, write_failure_video  # noqa: E402
+from dv2s_gym.mining.conversion.failure_video import ACTOR_MARGIN, VIDEO_CONFIG, clip_camera, write_failure_video  # noqa: E402
 
 SCENARIO = "highway_lead_vehicle_stopped"
 PARAMS = {"ego_speed": 25.0, "stopped_gap": 90.0, "traffic_speed": 22.0}
@@ -56,7 +56,7 @@ def test_the_view_looks_ahead_only_as_far_as_the_actor_needs():
 
 
 def test_a_stall_clip_holds_the_car_the_ego_stood_behind():
-    from dv2s_gym.mining.failure_video import VideoSettings, _camera
+    from dv2s_gym.mining.conversion.failure_video import VideoSettings, _camera
 
     # the ego stands; a car stopped 60 m ahead in its lane, another cruising by in the next lane
     states = [{"ego": [0.0, 0.0, 0.0, 0.0], "blocker": [60.0, 0.3, 0.0, 0.0], "passer": [-20.0 + 4 * k, 4.0, 0.0, 20.0]}

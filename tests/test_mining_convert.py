@@ -12,16 +12,16 @@ import json
 import numpy as np
 import pytest
 
-import dv2s_gym.mining.convert as convert_module
-from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.conversion_episodes import reproduction_seeds, same_failure_class
-from dv2s_gym.mining.conversion_ranges import exact_number
-from dv2s_gym.mining.conversion_replay import replay_failure_entry
-from dv2s_gym.mining.convert import convert_failure
+import dv2s_gym.mining.conversion.convert as convert_module
+from dv2s_gym.mining.conversion.settings import ConversionSettings
+from dv2s_gym.mining.conversion.episodes import reproduction_seeds, same_failure_class
+from dv2s_gym.mining.conversion.ranges import exact_number
+from dv2s_gym.mining.conversion.replay import replay_failure_entry
+from dv2s_gym.mining.conversion.convert import convert_failure
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.settings import MineSettings
-from dv2s_gym.mining.exact_replay import replay_failure
-from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_video, write_failure_video
+from dv2s_gym.mining.conversion.exact_replay import replay_failure
+from dv2s_gym.mining.conversion.failure_video import FailureReplayError, record_failure_video, write_failure_video
 from dv2s_gym.pipeline.video import read_video
 from envs.trace import EpisodeTrace
 from loop_helpers import written_report
@@ -40,7 +40,7 @@ SCENARIO = "urban_lead_vehicle_stopped"
 
 def midpoint(scenario: str) -> dict:
     """The centre of a scenario's mined parameter space (the miner's scene features)."""
-    from dv2s_gym.mining.space import SceneSpace
+    from dv2s_gym.mining.sampling.space import SceneSpace
 
     return {name: r.from_unit(0.5) for name, r in SceneSpace([scenario]).param_ranges(scenario).items()}
 
@@ -215,8 +215,8 @@ def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_pat
     row), captioned with the scenario, seed and outcome; the exact replay shows its failure clip alone, saying why;
     the mining report's card shows both clips too."""
     from dv2s_gym.mining.html import render_html
-    from dv2s_gym.mining.loop_report import render_html as loop_html
-    from dv2s_gym.mining.loop_report import round_clips
+    from dv2s_gym.loop.report import render_html as loop_html
+    from dv2s_gym.loop.report import round_clips
     from dv2s_gym.mining.report import build_report_from_records
 
     seed = out["reproduction"]["clip"]["seed"]
@@ -473,7 +473,7 @@ def test_a_script_without_the_failures_interaction_is_rejected_though_the_policy
 
 
 def test_each_failed_check_of_the_judge_is_its_own_reason():
-    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion.judge import judge_conversion
 
     interaction = {"kind": "car", "manoeuvres": ["brake", "stop"], "failure_type": "stall"}
     out = {"reproduction": {"k": 10, "reproduced": 2, "rate": 0.2, "interaction_shown": 1},
@@ -494,9 +494,9 @@ def test_the_judge_rejects_a_script_whose_actors_or_parameter_ranges_are_not_the
     """The failure: the ego ran into a car cutting in while a pedestrian crossed (two actors, the adversary a car).
     A script that reproduces it and that the reference avoids is still rejected, each problem its own reason,
     when its actors differ from the failure's or its ranges leave out the failing values."""
-    from dv2s_gym.mining.conversion_episodes import compare_actors
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.episodes import compare_actors
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     interaction = {"kind": "car", "manoeuvres": ["cut_in"]}
     failure = {"type": "collision", "with_kind": "car"}
@@ -533,7 +533,7 @@ def test_the_judge_rejects_a_script_whose_actors_or_parameter_ranges_are_not_the
 
 
 def test_the_actor_census_of_a_trace_counts_every_actor_but_the_ego_by_kind():
-    from dv2s_gym.mining.conversion_episodes import actor_census
+    from dv2s_gym.mining.conversion.episodes import actor_census
 
     trace = EpisodeTrace(scenario="s", source="", seed=0, scene_seed=0, params={}, config={},
                          states=[{"ego": [0, 0], "lead": [1, 0]}, {"ego": [0, 0], "lead": [1, 0], "walker": [2, 2]}],
@@ -542,8 +542,8 @@ def test_the_actor_census_of_a_trace_counts_every_actor_but_the_ego_by_kind():
 
 
 def test_any_reference_failure_counts_against_the_new_scenario_whatever_its_class():
-    from dv2s_gym.mining.conversion_episodes import reference_failed, reference_outcome
-    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion.episodes import reference_failed, reference_outcome
+    from dv2s_gym.mining.conversion.judge import judge_conversion
 
     rear = {"type": "collision", "with_kind": "car", "collision_type": "rear_end"}
     behind = {"type": "collision", "with_kind": "car", "collision_type": "struck_from_behind",
@@ -596,7 +596,7 @@ def test_a_script_on_which_the_reference_fails_another_way_is_rejected(record, t
 
 @pytest.mark.slow
 def test_a_near_copy_of_a_mined_entry_of_the_same_family_is_merged(tmp_path):
-    from dv2s_gym.mining.convert import _family
+    from dv2s_gym.mining.conversion.convert import _family
     from scenario_bank.bank import changed_code_lines
 
     script = Bank().get(SCENARIO).script
@@ -630,7 +630,7 @@ def test_a_near_copy_of_a_mined_entry_of_the_same_family_is_merged(tmp_path):
 
 
 def test_the_replay_script_narrows_the_continuous_ranges_and_fixes_the_discrete_ones_at_the_failing_values():
-    from dv2s_gym.mining.exact_replay import narrowed_script
+    from dv2s_gym.mining.conversion.exact_replay import narrowed_script
 
     script = ("param map = 'highway_straight'\nparam gap = Range(20, 40)  # metres\nparam lanes = DiscreteRange(1, 3)\n"
               "param colour = Uniform('red', 'blue')\nparam other = Range(0, 10)\nego = new Car\n")
@@ -651,7 +651,7 @@ def test_the_replay_script_narrows_the_continuous_ranges_and_fixes_the_discrete_
 
 
 def test_the_replay_script_narrows_an_offset_range_fixes_a_two_valued_choice_and_lists_what_it_cannot_narrow():
-    from dv2s_gym.mining.exact_replay import narrowed_script
+    from dv2s_gym.mining.conversion.exact_replay import narrowed_script
 
     script = ("param map = 'highway_straight'\nparam ego_speed = Range(22, 30)\nparam lead_gap = Range(0, 10) + 12\n"
               "param brake_strength = Uniform(0.3, 1.0)\nparam drawn = Range(1, 2)\nparam noise = Normal(0, 1)\n"
@@ -674,7 +674,7 @@ def test_the_replay_script_narrows_an_offset_range_fixes_a_two_valued_choice_and
 def test_the_replay_lists_every_value_the_script_draws_outside_its_params():
     """A draw in the script's body is recorded by no mining run, so the replay keeps it as the parent draws it: the
     entry is the failing scene at its own seed only, and its provenance says which draws make other seeds differ."""
-    from dv2s_gym.mining.exact_replay import narrowed_script
+    from dv2s_gym.mining.conversion.exact_replay import narrowed_script
 
     script = ("param map = 'highway_straight'\nparam gap = Range(20, 40)\nlanes = [1, 2]\n"
               "lane = Uniform(*lanes)\nfixedLane = Uniform(lanes[0])\negoS = Range(50, 1200)  # Range(1, 2) in a note\n"
@@ -698,8 +698,8 @@ def test_the_replay_lists_every_value_the_script_draws_outside_its_params():
 
 
 def test_the_judge_compares_parameter_names_without_case_and_never_prints_an_outside_value_as_inside():
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     passing = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interaction_shown": 10},
                "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
@@ -765,8 +765,8 @@ def test_the_judge_compares_a_failing_parameter_with_the_generated_one_that_sets
     ``car1_start``, its extra speed ``car1_extra_speed``, the crossing's distance ``pedestrian1_distance``. Each is
     paired by the actor it feeds and the quantity it sets; what the new script sets with no parameter (the speed after
     the cut-in, the kerb offset) is listed as not compared, with why."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     failing = {"ego_speed": 21.0, "cutter_extra_speed": 5.0, "start_offset": -6.0, "cut_in_gap": 8.0,
                "speed_after_cut_in": 0.0, "crossing_distance": 40.0, "kerb_offset": 2.8, "weather": "a"}
@@ -798,7 +798,7 @@ def test_the_judge_compares_a_failing_parameter_with_the_generated_one_that_sets
 def test_parameters_that_cannot_be_paired_one_to_one_are_not_compared_but_listed():
     """Two unnamed parameters that together place the lead car (``egoS + a + b``), and a generated script with two
     cars of the same behaviour the parent's car could be: nothing is guessed."""
-    from dv2s_gym.mining.param_meaning import meaning_map
+    from dv2s_gym.mining.conversion.param_meaning import meaning_map
 
     parent = ("param a = Range(1, 2)\nparam b = Range(1, 2)\nparam s = Range(1, 2)\n"
               "lead = new Car at lane.centerline.pointAlongBy(egoS + globalParameters.a + globalParameters.b),\n"
@@ -819,7 +819,7 @@ def test_parameters_that_cannot_be_paired_one_to_one_are_not_compared_but_listed
 
 
 def test_a_parameter_scaled_in_one_script_and_added_in_the_other_is_not_paired():
-    from dv2s_gym.mining.param_meaning import meaning_map
+    from dv2s_gym.mining.conversion.param_meaning import meaning_map
 
     parent = "param share = Range(0.5, 0.8)\nlead = new Car ahead of ego by 20, with speed globalParameters.v * (globalParameters.share)\n"
     generated = "param low = Range(5, 10)\ncar1 = new Car ahead of ego by 20, with speed globalParameters.v - globalParameters.low\n"
@@ -849,8 +849,8 @@ def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_coun
     """The judge could not compare parameters for several reasons (no counterpart, a distribution that is not an
     interval, a name match that reaches no object, one actor for two); the judge's reason, report.md and report.html
     name each with its count instead of calling them all "no parameter means the same"."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
     from dv2s_gym.mining.html import render_html
     from dv2s_gym.mining.report import build_report_from_records, markdown
 
@@ -905,8 +905,8 @@ _PASSING = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interactio
 
 
 def _judged(generated, parent=_CUT_PARENT, failing=_CUT_FAILING):
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     compared = compare_parameters(failing, generated, parent=parent)
     return compared, [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
@@ -939,7 +939,7 @@ def test_parameters_named_alike_that_reach_no_object_are_not_compared():
 
 
 def test_a_constant_term_a_factor_or_another_direction_changes_the_meaning():
-    from dv2s_gym.mining.param_meaning import meaning_map
+    from dv2s_gym.mining.conversion.param_meaning import meaning_map
 
     renamed = _CUT_PARENT.replace("cut_in_gap", "g").replace("lane_change_duration", "dur")
     # a constant term on a parameter that sets the quantity alone is read through (the tests below); beside
@@ -992,8 +992,8 @@ def test_one_actor_of_the_new_script_cannot_stand_for_two_of_the_parent():
 def test_the_failures_actors_must_be_the_scene_in_a_majority_of_the_runs():
     """Four of ten runs with the failure's one car, three with a pedestrian too, three with two cars: the most
     common set is the failure's, but not in most runs."""
-    from dv2s_gym.mining.conversion_episodes import compare_actors
-    from dv2s_gym.mining.conversion_judge import judge_conversion
+    from dv2s_gym.mining.conversion.episodes import compare_actors
+    from dv2s_gym.mining.conversion.judge import judge_conversion
 
     split = compare_actors({"car": 1}, [{"car": 1}] * 4 + [{"car": 1, "pedestrian": 1}] * 3 + [{"car": 2}] * 3, "car")
     assert split["script"] == {"car": 1} and split["runs_matching"] == 4 and not split["same"]
@@ -1067,7 +1067,7 @@ def test_an_expression_the_judge_cannot_read_stays_not_comparable():
 
 
 def test_an_affine_placement_distance_is_read_through():
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     parent = ("param lead_gap = Range(5, 11)\nego = new Car on lane.centerline\n"
               "lead = new Car ahead of ego by globalParameters.lead_gap\n")
@@ -1236,7 +1236,7 @@ def test_a_discrete_distribution_must_take_the_failing_value(gap_range, failing_
         assert compared["outside"] == ([] if inside else ["cut_in_gap"])
         if not inside:
             assert f"= {failing_gap:g} not among the values" in rejections[0] and f"({values})" in rejections[0]
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
     by_name = compare_parameters(failing, _cut_script("cut_in_gap", gap_range, "globalParameters.cut_in_gap"))
     assert by_name["outside"] == ([] if inside else ["cut_in_gap"])
 
@@ -1302,8 +1302,8 @@ def test_a_key_parameter_the_new_script_sets_by_its_own_parameter_must_be_compar
     """The merger's gap is a quantity of the failure's interaction (the key actor's): when the new script sets it by
     a parameter of its own the judge cannot compare, the script is rejected for that, though 3 of the failure's 4
     parameters compare (the half rule alone let it pass)."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     interaction = {"actor": "merger", "kind": "car"}
     compared = compare_parameters(_KEY_FAILING, _key_script(gap_expression, extra), parent=_KEY_PARENT,
@@ -1325,8 +1325,8 @@ def test_a_key_parameter_the_new_script_sets_by_its_own_parameter_must_be_compar
 def test_a_parameter_of_an_actor_beside_the_interaction_stays_within_the_half_rule():
     """The walker is no part of the failure with the merger: its speed set by the new script's own unreadable
     parameter is not compared, and with the other 3 compared the script passes."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     interaction = {"actor": "merger", "kind": "car"}
     generated = (_KEY_PARENT.replace("param traffic_speed = Range(20, 30)", "param w = Range(4, 6)")
@@ -1347,8 +1347,8 @@ def test_a_key_quantity_the_new_script_fixes_without_a_parameter_must_hold_the_f
     """A generated script parameterises the scene its own way: a key quantity it fixes (a number, an inline range,
     discrete values; a parameter times 0 is a number) is no comparison the judge failed and counts within the half
     rule, but only when it holds the failing value: the merger's gap fixed at 40..60 can never be the failing 6."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     generated = _key_script(fixed).replace("param g = Range(5, 11)\n", "")
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction={"actor": "merger"})
@@ -1366,7 +1366,7 @@ def test_a_key_quantity_the_new_script_fixes_without_a_parameter_must_hold_the_f
 
 
 def test_a_parameter_times_zero_is_no_use_of_it():
-    from dv2s_gym.mining.param_meaning import parameter_uses
+    from dv2s_gym.mining.conversion.param_meaning import parameter_uses
 
     uses = parameter_uses(_key_script("globalParameters.dur * 0 - 15"))
     assert {slot for _, _, slot, _, _ in uses["dur"]} == {"behavior:duration"}
@@ -1385,8 +1385,8 @@ def test_a_parameter_times_zero_is_no_use_of_it():
 ])
 def test_a_key_quantity_fixed_away_from_the_failing_value_is_rejected_whatever_else_uses_the_parameter(
         generated, reason_start):
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     interaction = {"actor": "merger", "kind": "car"}
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction=interaction)
@@ -1402,10 +1402,10 @@ def test_a_key_quantity_fixed_away_from_the_failing_value_is_rejected_whatever_e
 def test_a_fixed_key_value_holds_the_failing_value_within_the_replay_narrowing_of_the_parents_width(fixed, holds):
     """A faithful script may fix a timing at a round number: it holds the failing value when it lies within
     FIXED_TOLERANCE (the replay narrowing, NARROW) of the width the parent's range gives the quantity, no further."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_keys import FIXED_TOLERANCE
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
-    from dv2s_gym.mining.exact_replay import NARROW
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.keys import FIXED_TOLERANCE
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
+    from dv2s_gym.mining.conversion.exact_replay import NARROW
 
     assert FIXED_TOLERANCE == NARROW == 0.02
     generated = _key_script(fixed).replace("param g = Range(5, 11)\n", "")
@@ -1418,7 +1418,7 @@ def test_a_fixed_key_value_holds_the_failing_value_within_the_replay_narrowing_o
 def test_the_tolerance_of_a_fixed_key_value_follows_the_parents_expression():
     """The parent sets the merger's speed by ego_speed + 5 (range 18..25, width 7: 0.14 of tolerance on the
     quantity, failing quantity 25): 25.1 holds it, 25.2 does not."""
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     parent = _KEY_PARENT.replace("    with speed 25,\n", "    with speed globalParameters.ego_speed + 5,\n")
     interaction = {"actor": "merger", "kind": "car"}
@@ -1452,8 +1452,8 @@ def test_a_key_behaviour_argument_the_behaviour_assigns_anew_is_rejected(stateme
     """The walker's pace is passed to Walk, but a body that assigns pace anew walks at another pace whatever the
     parameter: rejected as an override, unless the value it assigns holds the failing value (1.41 against 1.4,
     within 0.02); another name assigned is no override."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     generated = _OVERRIDE_PARENT.replace("    take SetWalkingSpeedAction(pace)\n",
                                          f"    {statement}\n    take SetWalkingSpeedAction(pace)\n")
@@ -1475,8 +1475,8 @@ def test_a_key_behaviour_argument_the_behaviour_assigns_anew_is_rejected(stateme
 
 
 def test_a_behaviour_the_parent_overrides_alike_is_no_override():
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     parent = _OVERRIDE_PARENT.replace("    take SetWalkingSpeedAction(pace)\n",
                                       "    pace = pace + 0.1\n    take SetWalkingSpeedAction(pace)\n")
@@ -1491,8 +1491,8 @@ def test_a_behaviour_the_parent_overrides_alike_is_no_override():
 def test_the_egos_target_speed_is_read_as_its_speed(target, holds):
     """The parent sets the ego's speed by ego_speed and gives it no behaviour; the new script keeps the start speed
     but drives the ego at a fixed target speed: it must hold the failing 10 (within 2 % of 8..12, 0.08)."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     generated = _OVERRIDE_PARENT.replace("    with speed globalParameters.ego_speed\n",
                                          "    with speed globalParameters.ego_speed,\n"
@@ -1508,7 +1508,7 @@ def test_the_egos_target_speed_is_read_as_its_speed(target, holds):
 def test_a_behaviour_of_the_same_name_and_arguments_keeps_its_argument_check():
     """A body edited but the behaviour's name and arguments kept: a key argument fixed away from the failing value is
     still checked (a behaviour renamed, or with other arguments, may read it otherwise and is not)."""
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     interaction = {"actor": "walker", "kind": "pedestrian"}
     edited = _OVERRIDE_PARENT.replace("    wait\n", "    wait\n    wait\n").replace(
@@ -1542,8 +1542,8 @@ _JUNCTION_FAILING = {"ego_speed": 8.0, "ego_distance": 30.0, "bus_speed": 9.0, "
 def test_a_key_placement_set_by_a_product_of_parameters_is_compared_jointly(ego_distance, times, holds):
     """The parent places the ego ego_distance before the junction; the new script places it ego_speed * (lead +
     lag), a product the judge reads jointly: ego_speed held at the failing 8, lead and lag over their ranges."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     generated = (_JUNCTION_PARENT.replace("param ego_distance = Range(20, 40)", "param lead = " + times)
                  .replace("pointAlongBy(-globalParameters.ego_distance)",
@@ -1563,7 +1563,7 @@ def test_a_key_placement_set_by_a_product_of_parameters_is_compared_jointly(ego_
 
 
 def test_a_product_that_uses_a_sampled_value_twice_is_not_read_jointly():
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     generated = (_JUNCTION_PARENT.replace("param ego_distance = Range(20, 40)", "param lead = Range(3, 5)")
                  .replace("pointAlongBy(-globalParameters.ego_distance)",
@@ -1577,8 +1577,8 @@ def test_a_product_that_uses_a_sampled_value_twice_is_not_read_jointly():
 def test_a_relative_speed_rewritten_as_absolute_is_compared_jointly(speed_range, holds):
     """The parent drives the bus at bus_speed + bus_extra (failing 9 + 2 = 11); the new script drives it at one
     parameter of its own: it must hold 11."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     generated = (_JUNCTION_PARENT.replace("param bus_extra = Range(1, 3)", "")
                  .replace("param bus_speed = Range(7, 11)", f"param bus_v = {speed_range}")
@@ -1594,9 +1594,9 @@ def test_a_relative_speed_rewritten_as_absolute_is_compared_jointly(speed_range,
 def test_a_normal_parameter_is_read_as_three_standard_deviations_about_its_mean(distribution, holds):
     """The walker's pace drawn from a Normal: the failing 1.4 must lie within 3 standard deviations of its mean
     (1.2..1.8 and 1.39..1.51 hold it; 1.7..2.3 and 1.41..1.59 do not)."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
-    from dv2s_gym.mining.conversion_ranges import NORMAL_SPREAD
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
+    from dv2s_gym.mining.conversion.ranges import NORMAL_SPREAD
 
     assert NORMAL_SPREAD == 3.0
     generated = _OVERRIDE_PARENT.replace("param pace = Range(1.0, 2.0)", f"param pace = {distribution}")
@@ -1614,8 +1614,8 @@ def test_an_actor_made_in_a_top_level_loop_that_runs_is_read_as_made_at_the_top_
     """The walker made in the body of a loop over range(1) or range(3) is compared as in the parent (its body runs;
     a specifier line after a trailing comma continues the statement at any indentation); over range(0), or a count
     the judge does not know, its parameters reach no object."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     generated = _OVERRIDE_PARENT.replace("walker = new Pedestrian ahead of ego by 30,\n    with name \"walker\",\n",
                                          f"{loop}\n    walker = new Pedestrian ahead of ego by 30,\n"
@@ -1649,8 +1649,8 @@ def test_a_parameter_compared_on_its_key_quantity_stays_compared_when_another_qu
     """ego_speed sets the ego's speed the same way in both scripts (compared, inside); the drifter's speed the new
     script computes otherwise cannot be compared: it is listed, and it does not make the ego's speed a key parameter
     the judge could not compare."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     generated = _SLOWER_PARENT.replace("globalParameters.ego_speed - globalParameters.slower_by", speed)
     failing = {"ego_speed": 20.0, "slower_by": 3.0, "gap": 6.0}
@@ -1684,9 +1684,9 @@ def test_a_variable_computed_from_a_parameter_is_followed_like_an_expression(ass
 def test_each_bank_scenario_judged_against_itself_compares_every_parameter():
     """The judge on a shipped scenario and itself (failing values in the middle of each range): every parameter is
     compared, none outside, no rejection, whatever the key actor."""
-    from dv2s_gym.mining.conversion_judge import judge_conversion
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
-    from dv2s_gym.mining.conversion_ranges import script_ranges
+    from dv2s_gym.mining.conversion.judge import judge_conversion
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
+    from dv2s_gym.mining.conversion.ranges import script_ranges
 
     bank = Bank()
     for name in sorted(bank.names()):
@@ -1703,7 +1703,7 @@ def test_each_bank_scenario_judged_against_itself_compares_every_parameter():
 def test_a_number_beyond_what_floating_point_keeps_makes_the_expression_unread(expression):
     """Scenic computes ``(g + 1e16) - 1e16`` in floating point (6 becomes 6 or 8): the judge does not read it as
     ``g``; the key quantity is then not comparable and the script rejected."""
-    from dv2s_gym.mining.scenic_values import affine_form
+    from dv2s_gym.mining.conversion.scenic_values import affine_form
 
     assert affine_form(expression, "g") is None
     compared, rejections = _judged(_CUT_PARENT.replace("param cut_in_gap = Range(5, 11)", "param g = Range(5, 11)")
@@ -1717,7 +1717,7 @@ def test_a_distance_along_the_lane_is_read_only_from_the_egos_point(reference, c
     """``pointAlongBy(egoS + g)`` places the actor ``g`` ahead of the ego (the ego is at ``pointAlongBy(egoS)``);
     from another point (``otherS + g``) or from the lane's start (``g``) the same number is another distance: the
     judge does not read it as the parent's distance from the ego (the key quantity is then not comparable)."""
-    from dv2s_gym.mining.conversion_parameters import compare_parameters
+    from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     parent = ("param lead_gap = Range(10, 20)\negoS = Range(50, 400)\notherS = Range(0, 600)\n"
               "ego = new Car at lane.centerline.pointAlongBy(egoS)\n"

@@ -35,8 +35,8 @@ from dv2s_gym.mining.monitors import (
     detect_failure,
     robustness,
 )
-from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, default_feedback, is_adaptive, make_sampler
-from dv2s_gym.mining.space import SceneSpace
+from dv2s_gym.mining.sampling.samplers import SAMPLERS, SceneSampler, default_feedback, is_adaptive, make_sampler
+from dv2s_gym.mining.sampling.space import SceneSpace
 from envs.errors import DV2SError, SceneSamplingError
 from envs.trace import EpisodeTrace
 from policies.evaluation import EpisodeResult
@@ -358,14 +358,14 @@ def test_sampler_state_round_trips_through_dumps_and_loads(name, small_space):
 def test_a_corrupt_sampler_checkpoint_is_refused():
     import dill
 
-    from dv2s_gym.mining.checkpoint_mac import seal
+    from dv2s_gym.mining.sampling.checkpoint_mac import seal
 
     with pytest.raises(MiningError, match="holds no sampler.*delete sampler.pkl"):
         SceneSampler.loads(seal(dill.dumps({"not": "a sampler"})))
 
 
 def test_adaptive_samplers_take_verifai_options(small_space):
-    from dv2s_gym.mining.samplers import is_adaptive, sampler_params
+    from dv2s_gym.mining.sampling.samplers import is_adaptive, sampler_params
 
     params = sampler_params("cross-entropy", {"alpha": 0.5, "buckets": 1})
     assert (params.alpha, params.cont.buckets, params.thres) == (0.5, 1, 0.0)
@@ -760,7 +760,7 @@ def test_the_failure_state_descriptor_and_state_novelty_feedback():
 
 
 def test_novelty_bandit_options_are_checked(small_space):
-    from dv2s_gym.mining.samplers import sampler_params
+    from dv2s_gym.mining.sampling.samplers import sampler_params
 
     assert sampler_params("novelty-bandit", {"explore": 0.5}) == {"explore": 0.5, "prior_new": 2.0, "prior_old": 1.0}
     for bad, match in (({"explore": 0.0}, r"explore must be in \(0, 1\]"), ({"prior_old": -1}, "prior_old must be > 0"),

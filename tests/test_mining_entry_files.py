@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from dv2s_gym.bank_validate import validate_entry
-from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.convert import convert_failure
+from dv2s_gym.mining.conversion.settings import ConversionSettings
+from dv2s_gym.mining.conversion.convert import convert_failure
 from dv2s_gym.pipeline.video import read_video
 from envs.trace import EpisodeTrace
 from policies.evaluation import trajectory_hash

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from dv2s_gym.mining.interaction import (failure_interaction, interaction_sentence, key_actor,
+from dv2s_gym.mining.conversion.interaction import (failure_interaction, interaction_sentence, key_actor,
                                          shows_interaction)
 from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
@@ -175,7 +175,7 @@ def _rear_end_into_steady_car(impact_drop: float, brake_before: bool = False) ->
 
 def test_the_speed_an_impact_takes_away_is_no_braking_of_the_struck_car():
     from dv2s_gym.mining.behaviour import extract_behaviour
-    from dv2s_gym.mining.interaction import trace_shows_interaction
+    from dv2s_gym.mining.conversion.interaction import trace_shows_interaction
     from dv2s_gym.mining.monitors import Failure
 
     steady = _rear_end_into_steady_car(impact_drop=3.1)
@@ -192,7 +192,7 @@ def test_the_speed_an_impact_takes_away_is_no_braking_of_the_struck_car():
 
 
 def test_the_judge_wants_the_manoeuvre_and_the_collision_from_the_same_actor():
-    from dv2s_gym.mining.interaction import trace_shows_interaction
+    from dv2s_gym.mining.conversion.interaction import trace_shows_interaction
 
     n = 30
     # a car beside the ego brakes hard; another car ahead, cruising, is the one the ego hits
@@ -206,7 +206,7 @@ def test_the_judge_wants_the_manoeuvre_and_the_collision_from_the_same_actor():
 
 
 def test_a_car_beside_the_ego_does_not_show_a_stall_behind_a_car_in_its_lane():
-    from dv2s_gym.mining.interaction import trace_shows_interaction
+    from dv2s_gym.mining.conversion.interaction import trace_shows_interaction
 
     n = 40
     behind = _trace({"ego": _drive(0.0, 0.0, _ramp(25.0, 0.0, 0, 20, n)), "slow": _drive(40.0, 0.0, [0.0] * n)})

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.convert import convert_failure
-from dv2s_gym.mining.exact_replay import replay_failure
+from dv2s_gym.mining.conversion.settings import ConversionSettings
+from dv2s_gym.mining.conversion.convert import convert_failure
+from dv2s_gym.mining.conversion.exact_replay import replay_failure
 from dv2s_gym.mining.monitors import MonitorSettings
 from dv2s_gym.pipeline.video import read_video
 from envs.dv2s_env import DV2SEnv
@@ -77,7 +77,7 @@ def test_a_failure_in_a_jailed_scenario_gets_its_video_and_its_exact_replay(reco
 
 @pytest.mark.slow
 def test_the_exact_replay_is_kept_when_the_video_stage_fails(record, user_bank, tmp_path, monkeypatch):
-    from dv2s_gym.mining import convert as convert_module
+    from dv2s_gym.mining.conversion import convert as convert_module
 
     def broken(*args, **kwargs):
         raise OSError("no space left on device")

@@ -1,4 +1,4 @@
-"""The failure-rate estimate of a mining run (``dv2s_gym.mining.rate``): importance weights from the proposal
+"""The failure-rate estimate of a mining run (``dv2s_gym.mining.sampling.rate``): importance weights from the proposal
 density each scene was drawn with, on synthetic cases where the true rate is known."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dv2s_gym.mining.rate import failure_rate, weighted_rate
+from dv2s_gym.mining.sampling.rate import failure_rate, weighted_rate
 from scenario_bank.records import EpisodeRecord
 
 
@@ -65,7 +65,7 @@ def _cross_entropy_run(dimensions: int, draws: int, seed: int):
     parameter is below 0.2 (true rate 0.2), scenario 1 never (0); each with ``dimensions`` parameters."""
     from verifai.features import Box, DiscreteBox, Feature, FeatureSpace
 
-    from dv2s_gym.mining.samplers import make_sampler, scene_proposal
+    from dv2s_gym.mining.sampling.samplers import make_sampler, scene_proposal
 
     space = FeatureSpace({"scenario": Feature(DiscreteBox([0, 1])),
                           "u": Feature(Box(*[[0.0, 1.0]] * dimensions))})
@@ -129,7 +129,7 @@ def _novelty_bandit_run(draws: int, seed: int, window: int = 4):
     failing scenarios."""
     from verifai.features import Box, DiscreteBox, Feature, FeatureSpace
 
-    from dv2s_gym.mining.samplers import NOVELTY, make_sampler, scene_proposal
+    from dv2s_gym.mining.sampling.samplers import NOVELTY, make_sampler, scene_proposal
 
     space = FeatureSpace({"scenario": Feature(DiscreteBox([0, 2])), "u": Feature(Box(*[[0.0, 1.0]] * 2))})
     sampler = make_sampler(NOVELTY, space, seed)

@@ -7,10 +7,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dv2s_gym.mining.conversion_settings import ConversionSettings
+from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.html import _cards, _Videos
-from dv2s_gym.mining.loop_record import RoundRecord
-from dv2s_gym.mining.loop_report import _entry_clips
+from dv2s_gym.loop.record import RoundRecord
+from dv2s_gym.loop.report import _entry_clips
 from loop_helpers import written_report
 
 KEEP_LANE = ConversionSettings(policy="keep_lane")
@@ -65,8 +65,8 @@ def test_a_merged_clusters_clip_is_captioned_as_its_own_script_in_the_mining_rep
 
 
 def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
-    from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
-    from dv2s_gym.mining.loop_report import _errored_lines
+    from dv2s_gym.loop.errored import errored_episodes, merged_messages, messages_text
+    from dv2s_gym.loop.report import _errored_lines
     from dv2s_gym.workers.tasks import gave_up_result
 
     hung = ["the worker hung (no result after 60 s)"] * 2
@@ -90,8 +90,8 @@ def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
 
 
 def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(tmp_path):
-    from dv2s_gym.mining.conversion_replay import replay_failure_entry
-    from dv2s_gym.mining.convert import convert_failure
+    from dv2s_gym.mining.conversion.replay import replay_failure_entry
+    from dv2s_gym.mining.conversion.convert import convert_failure
 
     run = tmp_path / "run"
     run.mkdir()
@@ -108,8 +108,8 @@ def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(t
 
 
 def test_the_loop_html_shows_a_kind_with_its_seed_mark_escaped():
-    from dv2s_gym.mining.errored import errored_episodes
-    from dv2s_gym.mining.loop_report import _errored_lines, _markdown_to_html
+    from dv2s_gym.loop.errored import errored_episodes
+    from dv2s_gym.loop.report import _errored_lines, _markdown_to_html
     from dv2s_gym.workers.tasks import gave_up_result
 
     found = errored_episodes([gave_up_result({"scenario": "s", "seed": seed, "role": "eval", "policy": "p"},
@@ -119,7 +119,7 @@ def test_the_loop_html_shows_a_kind_with_its_seed_mark_escaped():
 
 
 def test_every_kept_entry_of_the_loop_report_shows_its_clip_or_why_it_has_none(tmp_path):
-    from dv2s_gym.mining.loop_report import render_html, round_clips
+    from dv2s_gym.loop.report import render_html, round_clips
 
     bank = tmp_path / "bank"
     rejected = bank / "replay_s_collision"
@@ -155,8 +155,8 @@ def test_every_kept_entry_of_the_loop_report_shows_its_clip_or_why_it_has_none(t
 
 
 def test_the_loop_report_lists_an_exact_replays_parameters_left_at_the_parents_distribution(tmp_path):
-    from dv2s_gym.mining.loop_report import _mining_lines
-    from dv2s_gym.mining.replays import replay_entries
+    from dv2s_gym.loop.report import _mining_lines
+    from dv2s_gym.loop.replays import replay_entries
 
     why = "its distribution Normal(0, 1) is not read as an interval or a set of numbers, so it keeps the parent's"
     rows = [{"cluster": "p/stall/0", "scenario": "p", "status": "kept", "replay_entry": "replay_p_stall",

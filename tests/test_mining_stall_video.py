@@ -11,7 +11,7 @@ import math
 
 import pytest
 
-from dv2s_gym.mining.failure_video import stall_end, write_failure_video
+from dv2s_gym.mining.conversion.failure_video import stall_end, write_failure_video
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, STALL_SPEED, MonitorSettings
 from dv2s_gym.pipeline.video import read_video
 

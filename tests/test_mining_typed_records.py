@@ -1,7 +1,7 @@
 """The mining modules that read episode records pass typed records to each other, not string-keyed dicts.
 
 The loop's rounds are typed to the step: each step of ``loop.json`` (``RoundSteps``) is a frozen record of
-``dv2s_gym.mining.loop_record`` (``MiningSummary`` with its ``MinedEntry`` list, ``SplitRecord``, ``ReferenceGate``,
+``dv2s_gym.loop.record`` (``MiningSummary`` with its ``MinedEntry`` list, ``SplitRecord``, ``ReferenceGate``,
 ``HeldOutBefore``, ``FineTuneArm``, ``HeldOutComparison``, ``UntouchedComparison``, ``RegressSummary``), the loop's
 functions return them, and each one's ``to_dict`` writes back exactly the JSON object it was read from.
 
@@ -42,7 +42,7 @@ TYPED_MODULES = ("behaviour", "cluster", "family", "rate", "report", "split", "l
 JSON_BOUNDARIES: Dict[str, str] = {
     "report.read_jsonl": "reads the JSON objects of a run's .jsonl files: the file format",
     "report.read_run": "returns the run's conversion records as read; their format is owned by the conversion "
-                       "(dv2s_gym.mining.convert), which has no typed record for them yet",
+                       "(dv2s_gym.mining.conversion.convert), which has no typed record for them yet",
     "report.build_report_from_records": "takes the run's settings.json and conversion records as read",
     "report.headline": "renders a MineReport or the JSON object report.json holds",
     "report.format_summary": "renders a MineReport or the JSON object report.json holds",
@@ -50,7 +50,7 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "report.write_reports": "writes a MineReport, or the JSON object report.json holds, and its renderings",
     "rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
     "miner.convert_clusters": "returns the run's conversion records as conversions.jsonl holds them; their format "
-                              "is owned by the conversion (dv2s_gym.mining.convert), which has no typed record for "
+                              "is owned by the conversion (dv2s_gym.mining.conversion.convert), which has no typed record for "
                               "them yet",
     "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
     "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
@@ -165,7 +165,7 @@ def test_the_functions_that_read_episodes_take_episode_records():
 
 
 def _step_records() -> Dict[str, type]:
-    from dv2s_gym.mining import loop_record
+    from dv2s_gym.loop import record as loop_record
 
     hints = typing.get_type_hints(loop_record.RoundSteps, vars(loop_record))
     return {step: hints[step] for step in loop_record.STEPS}
@@ -181,10 +181,10 @@ def test_every_step_of_a_round_is_a_typed_record():
 
 
 def test_the_mined_entries_are_typed_records():
-    from dv2s_gym.mining import loop_record
-    from dv2s_gym.mining.loop import mined_entries
-    from dv2s_gym.mining.replays import replay_entries
-    from dv2s_gym.mining.split import family_of, family_groups, split_by_family
+    from dv2s_gym.loop import record as loop_record
+    from dv2s_gym.loop.run import mined_entries
+    from dv2s_gym.loop.replays import replay_entries
+    from dv2s_gym.loop.split import family_of, family_groups, split_by_family
 
     hints = typing.get_type_hints(loop_record.MiningSummary, vars(loop_record))
     assert typing.get_args(typing.get_args(hints["kept"])[0]) == (loop_record.MinedEntry, Ellipsis)
@@ -230,7 +230,7 @@ _ROUND = {
 
 
 def test_a_round_reads_into_typed_steps_and_writes_back_the_same_json():
-    from dv2s_gym.mining import loop_record
+    from dv2s_gym.loop import record as loop_record
 
     record = loop_record.RoundRecord.from_dict(_ROUND)
     steps = record.steps
@@ -249,7 +249,7 @@ def test_a_round_reads_into_typed_steps_and_writes_back_the_same_json():
 
 
 def test_the_records_the_loop_builds_write_the_json_it_wrote_as_dicts():
-    from dv2s_gym.mining.loop_record import FineTuneArm, MinedEntry, RegressComparison
+    from dv2s_gym.loop.record import FineTuneArm, MinedEntry, RegressComparison
 
     # a DAgger arm writes its reward weights, reference and agreement even when there are none; a PPO arm does not
     # write the DAgger fields at all
@@ -268,7 +268,7 @@ def test_the_records_the_loop_builds_write_the_json_it_wrote_as_dicts():
 
 
 def test_the_failure_interaction_is_a_typed_record_written_as_before():
-    from dv2s_gym.mining.interaction import FailureInteraction, failure_interaction, interaction_sentence
+    from dv2s_gym.mining.conversion.interaction import FailureInteraction, failure_interaction, interaction_sentence
 
     assert "FailureInteraction" in str(typing.get_type_hints(failure_interaction)["return"])
     alone = FailureInteraction(failure_type="stall")
@@ -358,9 +358,9 @@ def test_a_run_s_origin_is_recorded_as_the_json_object_the_reports_read(tmp_path
 
 
 def test_a_held_out_rate_is_a_rate_record_with_one_formatter():
-    from dv2s_gym.mining.heldout import paired_summary
-    from dv2s_gym.mining.loop_record import PairedSummary, PairedTable, Rate
-    from dv2s_gym.mining.loop_report import rate_text
+    from dv2s_gym.loop.heldout import paired_summary
+    from dv2s_gym.loop.record import PairedSummary, PairedTable, Rate
+    from dv2s_gym.loop.report import rate_text
     from scenario_bank.records import RecordError
 
     before = [{"scenario": "s", "seed": seed, "failed": seed < 3, "error": None} for seed in range(4)]
@@ -401,7 +401,7 @@ def test_the_mining_report_is_a_typed_record_written_as_report_json():
 
 
 def test_loop_json_s_settings_and_start_are_typed_records():
-    from dv2s_gym.mining.loop_record import LoopStart, RecordedLoopSettings
+    from dv2s_gym.loop.record import LoopStart, RecordedLoopSettings
     from scenario_bank.records import RecordError
 
     settings = {"policy": "dv2s-ppo", "bank_dir": None, "workers": 2, "holdout_by": "family",

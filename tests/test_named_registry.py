@@ -6,7 +6,9 @@ import inspect
 
 import pytest
 
-from dv2s_gym.mining import monitors, samplers
+from dv2s_gym.mining import monitors
+
+from dv2s_gym.mining.sampling import samplers
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.pipeline import stages
 from dv2s_gym.pipeline.errors import PipelineError

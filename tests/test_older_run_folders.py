@@ -8,10 +8,10 @@ import json
 
 import pytest
 
-import dv2s_gym.mining.space as space_module
+import dv2s_gym.mining.sampling.space as space_module
 from loop_helpers import run_loop
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.loop_settings import LoopError
+from dv2s_gym.loop.settings import LoopError
 from dv2s_gym.mining.miner import SETTINGS_VERSION, _recorded, mine
 from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.regress.errors import ReportMismatchError, ResumeMismatchError
@@ -163,7 +163,8 @@ def test_a_regress_report_of_another_schema_version_is_refused(tmp_path):
 def test_the_older_paths_are_gone():
     """No split by cluster, no failure kinds assumed for a report that names none, no anonymous error counts, no
     defaults for settings a record lacks, no family made up for a record without one."""
-    from dv2s_gym.mining import errored, split
+    from dv2s_gym.loop import errored
+    from dv2s_gym.loop import split
     from dv2s_gym.mining.family import record_family
     from dv2s_gym.regress import failures
     from scenario_bank import run_identity

@@ -109,7 +109,7 @@ def _called(node: ast.AST) -> Optional[str]:
 
 def _file_spec(node: ast.AST, known: set) -> Optional[str]:
     """The project module a ``spec_from_file_location(name, location)`` call loads: the module ``name`` names, else
-    the one a string in ``location`` is the file of (``ROOT / "dv2s_gym/mining/heldout.py"``), else
+    the one a string in ``location`` is the file of (``ROOT / "dv2s_gym/loop/heldout.py"``), else
     :data:`FROM_A_FILE`; ``None`` for another expression."""
     if _called(node) != "spec_from_file_location":
         return None
@@ -426,15 +426,15 @@ PLANTS_BY_NAME = {
     "inspect.getmembers": "def _planted():\n    return dict(inspect.getmembers(heldout))['_rate']\n",
     "class attribute holder": "class _Holder:\n    module = heldout\n\n\ndef _planted():\n"
                               "    return _Holder.module._rate\n",
-    "sys.modules": "def _planted():\n    return sys.modules['dv2s_gym.mining.heldout']._rate\n",
-    "pydoc.locate": "def _planted():\n    return pydoc.locate('dv2s_gym.mining.heldout._rate')\n",
+    "sys.modules": "def _planted():\n    return sys.modules['dv2s_gym.loop.heldout']._rate\n",
+    "pydoc.locate": "def _planted():\n    return pydoc.locate('dv2s_gym.loop.heldout._rate')\n",
     "match capture": "def _planted():\n    match heldout:\n        case module:\n            return module._rate\n",
     "comprehension variable": "def _planted():\n    return [module._rate for module in [heldout]]\n",
     "functools.partial(getattr)": "def _planted():\n    return functools.partial(getattr, heldout)('_rate')\n",
     "builtins.getattr": "def _planted():\n    return builtins.getattr(heldout, '_rate')\n",
     "__import__ with fromlist": "def _planted():\n"
-                                "    return __import__('dv2s_gym.mining.heldout', fromlist=['x'])._rate\n",
-    "pkgutil.resolve_name": "def _planted():\n    return pkgutil.resolve_name('dv2s_gym.mining.heldout:_rate')\n",
+                                "    return __import__('dv2s_gym.loop.heldout', fromlist=['x'])._rate\n",
+    "pkgutil.resolve_name": "def _planted():\n    return pkgutil.resolve_name('dv2s_gym.loop.heldout:_rate')\n",
     "a class's private method": "def _planted(record):\n    return heldout.HeldOutStore._rate(record)\n",
 }
 """Ways to reach ``heldout``'s private ``_rate`` from another module that no binding-based rule follows."""
@@ -445,18 +445,18 @@ def test_a_private_name_is_refused_whatever_the_spelling(tmp_path, family):
     """A copy of a real module (which imports ``heldout`` and does not define ``_rate``) with a function appended
     that reaches ``_rate``: the by-name rule reports it on the planted lines, and only there."""
     modules = list(_modules())
-    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.mining.loop")
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
     source = modules[index][1].read_text(encoding="utf-8")
-    assert "from dv2s_gym.mining import heldout," in source and "_rate" not in defined_names(ast.parse(source))
-    assert "_rate" in defined_names(ast.parse((ROOT / "dv2s_gym/mining/heldout.py").read_text(encoding="utf-8")))
+    assert "from dv2s_gym.loop import heldout\n" in source and "_rate" not in defined_names(ast.parse(source))
+    assert "_rate" in defined_names(ast.parse((ROOT / "dv2s_gym/loop/heldout.py").read_text(encoding="utf-8")))
     header = "\n\nimport builtins\nimport contextlib\nimport functools\nimport inspect\nimport operator\n" \
              "import pkgutil\nimport pydoc\nimport sys\n\n\n"
     copy = tmp_path / "loop.py"
     copy.write_text(source + header + PLANTS_BY_NAME[family], encoding="utf-8")
-    before = set(private_names_by_name(modules, only="dv2s_gym.mining.loop"))
+    before = set(private_names_by_name(modules, only="dv2s_gym.loop.run"))
     assert not before
-    modules[index] = ("dv2s_gym.mining.loop", copy)
-    added = set(private_names_by_name(modules, only="dv2s_gym.mining.loop"))
+    modules[index] = ("dv2s_gym.loop.run", copy)
+    added = set(private_names_by_name(modules, only="dv2s_gym.loop.run"))
     first = len((source + header).splitlines())
     assert added and all(name == "_rate" and line > first for _, line, name in added)
 
@@ -465,13 +465,13 @@ def test_a_string_rule_leaves_suffixes_and_a_modules_own_names_alone(tmp_path):
     """Strings that are parts of names (an f-string's literal, a suffix tested by endswith) and strings naming a
     private name the module defines itself are not uses of another module's private name."""
     modules = list(_modules())
-    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.mining.loop")
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
     copy = tmp_path / "loop.py"
     copy.write_text(modules[index][1].read_text(encoding="utf-8") + "\n\n\n_own = 1\n\n\n"
                     "def _planted(name):\n    return f'{name}_rate', name.endswith('_rate'), getattr(_planted, '_own')\n",
                     encoding="utf-8")
-    modules[index] = ("dv2s_gym.mining.loop", copy)
-    assert private_names_by_name(modules, only="dv2s_gym.mining.loop") == []
+    modules[index] = ("dv2s_gym.loop.run", copy)
+    assert private_names_by_name(modules, only="dv2s_gym.loop.run") == []
 
 
 def test_no_module_imports_another_modules_private_names():
@@ -511,46 +511,46 @@ def test_the_check_sees_both_ways_in(tmp_path, monkeypatch):
     ("dir(heldout)", NAMESPACE),
     ('getattr(heldout, "_" + "rate")', COMPUTED),
     ("module = heldout\n    return module._rate", "_rate"),
-    ("module = dv2s_gym.mining.heldout\n    return module._rate", "_rate"),
-    ('module = importlib.import_module("dv2s_gym.mining.heldout")\n    return module._rate', "_rate"),
-    ('return import_module("dv2s_gym.mining.heldout")._rate', "_rate"),
-    ('spec = importlib.util.spec_from_file_location("dv2s_gym.mining.heldout", where)\n'
+    ("module = dv2s_gym.loop.heldout\n    return module._rate", "_rate"),
+    ('module = importlib.import_module("dv2s_gym.loop.heldout")\n    return module._rate', "_rate"),
+    ('return import_module("dv2s_gym.loop.heldout")._rate', "_rate"),
+    ('spec = importlib.util.spec_from_file_location("dv2s_gym.loop.heldout", where)\n'
      '    return importlib.util.module_from_spec(spec)._rate', "_rate"),
     ('module = importlib.util.module_from_spec(importlib.util.spec_from_file_location(\n'
-     '        "copy", ROOT / "dv2s_gym/mining/heldout.py"))\n    return module._rate', "_rate"),
+     '        "copy", ROOT / "dv2s_gym/loop/heldout.py"))\n    return module._rate', "_rate"),
 ])
 def test_the_check_sees_private_names_reached_by_reflection_or_a_rebound_name(tmp_path, planted, name):
     """A copy of a real module (which imports ``heldout``) with a function appended that reaches ``heldout``'s
     private ``_rate`` another way than ``from ... import _rate`` or ``heldout._rate``."""
     modules = list(_modules())
-    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.mining.loop")
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
     source = modules[index][1].read_text(encoding="utf-8")
-    assert "from dv2s_gym.mining import heldout," in source
+    assert "from dv2s_gym.loop import heldout\n" in source
     copy = tmp_path / "loop.py"
     body = planted if "return" in planted else f"return {planted}"
-    copy.write_text(source + "\n\nimport importlib\nfrom importlib import import_module\nimport dv2s_gym.mining\n\n\n"
+    copy.write_text(source + "\n\nimport importlib\nfrom importlib import import_module\nimport dv2s_gym.loop\n\n\n"
                     f"def _planted():\n    {body}\n", encoding="utf-8")
-    before = private_uses(modules, only="dv2s_gym.mining.loop")
-    modules[index] = ("dv2s_gym.mining.loop", copy)
-    added = sorted(set(private_uses(modules, only="dv2s_gym.mining.loop")) - set(before))
+    before = private_uses(modules, only="dv2s_gym.loop.run")
+    modules[index] = ("dv2s_gym.loop.run", copy)
+    added = sorted(set(private_uses(modules, only="dv2s_gym.loop.run")) - set(before))
     last = len(copy.read_text(encoding="utf-8").splitlines())
     planted_uses = {(module, source, found) for module, line, source, found in added if line == last}
-    assert ("dv2s_gym.mining.loop", "dv2s_gym.mining.heldout", name) in planted_uses
-    assert {module for module, _, _ in planted_uses} == {"dv2s_gym.mining.loop"}
+    assert ("dv2s_gym.loop.run", "dv2s_gym.loop.heldout", name) in planted_uses
+    assert {module for module, _, _ in planted_uses} == {"dv2s_gym.loop.run"}
 
 
 def test_the_check_refuses_private_names_of_a_module_loaded_from_an_unknown_file(tmp_path):
     """A module made by ``module_from_spec`` from a file neither its name nor its path tells could be any project
     module: a private name taken from it is refused."""
     modules = list(_modules())
-    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.mining.loop")
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
     copy = tmp_path / "loop.py"
     copy.write_text(modules[index][1].read_text(encoding="utf-8") + "\n\nimport importlib.util\n\n\n"
                     "def _planted(where):\n    spec = importlib.util.spec_from_file_location('anything', where)\n"
                     "    loaded = importlib.util.module_from_spec(spec)\n    return loaded._hidden, loaded.public\n",
                     encoding="utf-8")
-    before = private_uses(modules, only="dv2s_gym.mining.loop")
-    modules[index] = ("dv2s_gym.mining.loop", copy)
-    added = set(private_uses(modules, only="dv2s_gym.mining.loop")) - set(before)
+    before = private_uses(modules, only="dv2s_gym.loop.run")
+    modules[index] = ("dv2s_gym.loop.run", copy)
+    added = set(private_uses(modules, only="dv2s_gym.loop.run")) - set(before)
     last = len(copy.read_text(encoding="utf-8").splitlines())
-    assert added == {("dv2s_gym.mining.loop", last, FROM_A_FILE, "_hidden")}
+    assert added == {("dv2s_gym.loop.run", last, FROM_A_FILE, "_hidden")}

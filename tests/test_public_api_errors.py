@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from dv2s_gym.mining.checkpoint_mac import DamagedKeyError
+from dv2s_gym.mining.sampling.checkpoint_mac import DamagedKeyError
 from dv2s_gym.pipeline.semantics.text import parse_description
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.pytest_plugin import regression_arguments

@@ -194,7 +194,7 @@ def test_mining_and_regression_refuse_a_config_the_policy_was_not_trained_with(t
 def test_the_loop_runs_every_step_with_the_route_policys_observation(tmp_path, monkeypatch):
     """Mining, the held-out episodes, both fine-tuning arms, the untouched set and the regression test of `dv2s loop`
     all get the starting policy's card's config, route observation included."""
-    import dv2s_gym.mining.heldout as heldout
+    import dv2s_gym.loop.heldout as heldout
     import dv2s_gym.regress.runner as runner
     import policies.imitation as imitation
     from loop_helpers import FakeMiner, run_loop

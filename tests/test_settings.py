@@ -10,7 +10,7 @@ import pytest
 from dv2s_gym.cli.parser import Parser
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.cli.loop import loop_settings
-from dv2s_gym.mining.loop_settings import DEFAULTS, EVIDENCE, LoopError, LoopSettings
+from dv2s_gym.loop.settings import DEFAULTS, EVIDENCE, LoopError, LoopSettings
 from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.settings import RegressSettings

@@ -8,9 +8,9 @@ import math
 
 import pytest
 
-from dv2s_gym.mining.conversion_settings import ConversionSettings
+from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.loop_settings import LoopError, LoopSettings
+from dv2s_gym.loop.settings import LoopError, LoopSettings
 from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.settings import RegressSettings

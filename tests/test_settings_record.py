@@ -8,8 +8,9 @@ import json
 
 from dv2s_gym.cli import build_parser
 from dv2s_gym.cli.loop import _VALUED, loop_settings
-from dv2s_gym.mining import loop, miner
-from dv2s_gym.mining.loop_settings import LoopSettings
+from dv2s_gym.mining import miner
+from dv2s_gym.loop import run as loop
+from dv2s_gym.loop.settings import LoopSettings
 from dv2s_gym.mining.monitors import MonitorSettings
 from dv2s_gym.mining.settings import MineSettings
 

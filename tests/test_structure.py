@@ -461,27 +461,27 @@ def modules_named_in_strings(tree: ast.AST, modules: Dict[str, Path], processes:
 
 
 STRING_NAMED_PLANTS = {
-    "pydoc.locate": ("import pydoc\n    return pydoc.locate('dv2s_gym.mining.loop')", "dv2s_gym.mining.loop"),
+    "pydoc.locate": ("import pydoc\n    return pydoc.locate('dv2s_gym.loop.run')", "dv2s_gym.loop.run"),
     "pkgutil.get_data": ("import pkgutil\n    return pkgutil.get_data('dv2s_gym.mining', 'loop.py')",
                          "dv2s_gym.mining"),
     "importlib.resources.files": ("import importlib.resources\n"
                                   "    return importlib.resources.files('dv2s_gym.mining')", "dv2s_gym.mining"),
-    "mock.patch": ("from unittest import mock\n    return mock.patch('dv2s_gym.mining.loop.run_loop').start()",
-                   "dv2s_gym.mining.loop"),
+    "mock.patch": ("from unittest import mock\n    return mock.patch('dv2s_gym.loop.run.run_loop').start()",
+                   "dv2s_gym.loop.run"),
     "entry point": ("from importlib.metadata import entry_points\n"
                     "    return entry_points(group='console_scripts')['dv2s'].load()", "dv2s_gym.cli"),
     "walk_packages prefix": ("import pkgutil\n    return list(pkgutil.walk_packages(['x'], 'dv2s_gym.'))",
                              "dv2s_gym"),
     "dictConfig factory": ("import logging.config\n    logging.config.dictConfig({'version': 1, 'handlers': "
-                           "{'h': {'()': 'dv2s_gym.mining.loop.run_loop'}}})", "dv2s_gym.mining.loop"),
+                           "{'h': {'()': 'dv2s_gym.loop.run.run_loop'}}})", "dv2s_gym.loop.run"),
     "forkserver preload": ("import multiprocessing\n    multiprocessing.get_context('forkserver')"
-                           ".set_forkserver_preload(['dv2s_gym.mining.loop'])", "dv2s_gym.mining.loop"),
+                           ".set_forkserver_preload(['dv2s_gym.loop.run'])", "dv2s_gym.loop.run"),
     "methodcaller": ("import operator, importlib\n"
-                     "    return operator.methodcaller('import_module', 'dv2s_gym.mining.loop')(importlib)",
-                     "dv2s_gym.mining.loop"),
+                     "    return operator.methodcaller('import_module', 'dv2s_gym.loop.run')(importlib)",
+                     "dv2s_gym.loop.run"),
     "a module's __dict__": ("import importlib\n"
-                            "    return importlib.__dict__.get('import_module')('dv2s_gym.mining.loop')",
-                            "dv2s_gym.mining.loop"),
+                            "    return importlib.__dict__.get('import_module')('dv2s_gym.loop.run')",
+                            "dv2s_gym.loop.run"),
     "-m joined": ("import subprocess, sys\n    return subprocess.run([sys.executable, '-mdv2s_gym.cli'])",
                   "dv2s_gym.cli"),
     "console script": ("import subprocess\n    return subprocess.run(['dv2s', 'loop', '--help'])", "dv2s_gym.cli"),
@@ -520,7 +520,7 @@ def test_a_string_naming_a_module_as_a_key_a_part_or_a_docstring_is_no_edge(tmp_
     modules = _modules()
     copy = tmp_path / "planted.py"
     copy.write_text(modules["envs.trace"].read_text(encoding="utf-8") + '\n\ndef _planted(record):\n'
-                    '    """Read like dv2s_gym.mining.loop."""\n'
+                    '    """Read like dv2s_gym.loop.run."""\n'
                     '    return {"dv2s_gym": 1}, record["dv2s_gym"], record.get("policies"), f"dv2s_gym.{record}"\n',
                     encoding="utf-8")
     assert module_edges(copy, "envs.trace", modules) == module_edges(modules["envs.trace"], "envs.trace", modules)
@@ -577,7 +577,7 @@ def _assert_planted_load_is_seen(tmp_path, target, planted, loaded):
 
 @pytest.mark.parametrize("target, planted, loaded", [
     # regress may not import mining, envs may not import dv2s_gym: code run from a string imports all the same
-    ("dv2s_gym.regress.html", 'exec("import dv2s_gym.mining.loop")', "dv2s_gym.mining.loop"),
+    ("dv2s_gym.regress.html", 'exec("import dv2s_gym.loop.run")', "dv2s_gym.loop.run"),
     ("envs.trace", 'eval("__import__(\'dv2s_gym.story\')")', "dv2s_gym.story"),
     ("envs.trace", 'exec(compile("from dv2s_gym import story", "<planted>", "exec"))', "dv2s_gym.story"),
     ("envs.trace", 'import builtins\n    builtins.exec("exec(\'from ..policies import baselines\')")',
@@ -591,8 +591,8 @@ def test_the_graph_sees_an_import_planted_in_code_run_from_a_string(tmp_path, ta
 @pytest.mark.parametrize("planted, loaded", [
     ('import pkgutil\n    pkgutil.resolve_name("dv2s_gym.story:main")', "dv2s_gym.story"),
     ('from runpy import run_path\n    run_path("dv2s_gym/story_check.py")', "dv2s_gym.story_check"),
-    ('import sys, subprocess\n    subprocess.run([sys.executable, "-c", "import dv2s_gym.mining.loop"])',
-     "dv2s_gym.mining.loop"),
+    ('import sys, subprocess\n    subprocess.run([sys.executable, "-c", "import dv2s_gym.loop.run"])',
+     "dv2s_gym.loop.run"),
     ('import sys, subprocess\n    subprocess.run(f"{sys.executable} -m dv2s_gym.cli --help", shell=True)',
      "dv2s_gym.cli"),
     ('import os\n    os.system("python3 -c \'import dv2s_gym.demo\'")', "dv2s_gym.demo"),
@@ -628,12 +628,12 @@ def test_a_module_allowed_to_compute_names_still_loads_the_names_it_joins(tmp_pa
     target = "policies.registry"
     assert target in COMPUTED_LOADS
     source = modules[target].read_text(encoding="utf-8")
-    for planted in ('_PLANTED = "".join(("dv2s", "_gym.mining.loop")) + ":run_loop"\n',
+    for planted in ('_PLANTED = "".join(("dv2s", "_gym.loop.run")) + ":run_loop"\n',
                     '_PLANTED = "dv2s_gym." + "mining" + ".loop"\n', '_PLANTED = f"dv2s_gym.mining.{\'loop\'}"\n'):
         copy = tmp_path / "planted.py"
         copy.write_text(source + "\n\n" + planted, encoding="utf-8")
         assert module_edges(copy, target, modules) - module_edges(modules[target], target, modules) == {
-            "dv2s_gym.mining.loop"}, planted
+            "dv2s_gym.loop.run"}, planted
 
 
 def test_code_run_from_a_computed_string_is_refused():
@@ -914,7 +914,7 @@ def test_the_benchmark_check_sees_a_benchmark_loaded_by_name():
 
 
 SUBSYSTEMS = ("__init__", "registered_names", "progress_lines", "report_page", "workers", "pipeline", "story_check", "story", "bank_validate", "regress",
-              "mining", "demo", "cli")
+              "mining", "loop", "demo", "cli")
 """The parts of ``dv2s_gym/`` from the bottom up: each may import only those before it (and the lower packages)."""
 
 
@@ -2292,7 +2292,7 @@ def test_imports_are_at_the_top_of_the_module():
     ("dv2s_gym.regress.report", "import json"),
     ("dv2s_gym.regress.report", "from dv2s_gym.regress import family"),
     # loaded at start-up, but not one of STARTUP_FRONT: it may not defer a light module start-up does not load
-    ("dv2s_gym.mining.loop_settings", "from dv2s_gym.mining import report_text"),
+    ("dv2s_gym.loop.settings", "from dv2s_gym.mining import report_text"),
     # gymnasium is loaded at start-up anyway: a module that needs only it (policies.registry) is not heavy
     ("dv2s_gym.regress.report", "from policies.registry import load_policy"),
     # heavy, but policies.training loads it (and highway-env) at its top already: deferring it saves nothing
@@ -2309,7 +2309,7 @@ def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, target, 
     assert "dv2s_gym.regress.stats" in heavy and "dv2s_gym.regress.family" not in heavy  # scipy; numpy only
     assert "policies.registry" not in heavy and "policies.training" in heavy  # gymnasium only; sb3
     startup = startup_modules()
-    assert "dv2s_gym.mining.loop_settings" in startup and "dv2s_gym.mining.report_text" not in startup
+    assert "dv2s_gym.loop.settings" in startup and "dv2s_gym.mining.report_text" not in startup
     modules[target] = copy
     wrong = misplaced_imports(modules, heavy, startup)
     assert [line.rpartition(": ")[2] for line in wrong] == [planted]
@@ -2704,7 +2704,7 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                                       "geometry (no user input)",
     "scenario_bank.maps.urban_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
                                                               "tables (no user input)",
-    "dv2s_gym.mining.scenic_values:Quantity.over:AssertionError": "an invariant, not an input check: the image was "
+    "dv2s_gym.mining.conversion.scenic_values:Quantity.over:AssertionError": "an invariant, not an input check: the image was "
                                                                   "read when the Quantity was made (type narrowing)",
     "scenario_bank.maps.build_maps:write_maps:AssertionError": "the map builder's self-check that each builder "
                                                                "names its own map (no user input)",

@@ -4,7 +4,7 @@
     python -m bench.research.loop_harm_rule --families 6 --pairs 16 --discordant 0.31 --trials 2000
 
 ``dv2s loop`` does not accept a round's fine-tuned policy when, in any held-out family, a harm against the control
-is not ruled out (:func:`dv2s_gym.mining.loop_verdict.family_harm`). This script draws paired held-out tables for a
+is not ruled out (:func:`dv2s_gym.loop.verdict.family_harm`). This script draws paired held-out tables for a
 fine-tuned policy against a control whose differences are known (each pair discordant with probability
 ``--discordant``; a discordant pair is a failure of the fine-tuned policy only with probability ``share``, of the
 control only otherwise) and counts how often the product's own ``family_harm`` names a harmed family. With
@@ -22,8 +22,8 @@ from typing import Dict, Sequence
 
 import numpy as np
 
-from dv2s_gym.mining.loop_settings import LoopSettings
-from dv2s_gym.mining.loop_verdict import family_harm
+from dv2s_gym.loop.settings import LoopSettings
+from dv2s_gym.loop.verdict import family_harm
 from dv2s_gym.regress.stats import PairedTable
 
 

@@ -34,7 +34,7 @@ def loop_episodes(loop: Path) -> Tuple[List[Tuple[str, int]], str]:
 
 def arm_records(loop: Path, arm: str, episodes: Sequence[Tuple[str, int]]) -> List[Optional[Dict[str, Any]]]:
     """The records of ``arm`` (a sweep folder or ``loop:<role>``) on ``episodes``, ``None`` where one is missing."""
-    from dv2s_gym.mining.heldout import HeldOutStore
+    from dv2s_gym.loop.heldout import HeldOutStore
 
     if arm.startswith("loop:"):
         store, role = HeldOutStore(loop / "round_1" / "heldout.jsonl"), arm.split(":", 1)[1]
@@ -64,7 +64,7 @@ def failure_kind(record: Mapping[str, Any]) -> Optional[str]:
 def pair_arms(loop: Path, a: str, b: str) -> Dict[str, Any]:
     """Arm ``a`` against arm ``b`` on the held-out episodes of ``loop`` (see the module docstring)."""
     from dv2s_gym.mining.family import scenario_family
-    from dv2s_gym.mining.heldout import episode_failed
+    from dv2s_gym.loop.heldout import episode_failed
 
     episodes, bank = loop_episodes(loop)
     recs_a, recs_b = arm_records(loop, a, episodes), arm_records(loop, b, episodes)

@@ -10,11 +10,11 @@ from typing import TYPE_CHECKING, Any, List, Optional
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_value, output_folder
 from dv2s_gym.cli.parser import bank_option
-from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS, EVIDENCE, FINE_TUNE_METHODS, PROFILES, LoopSettings
-from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
+from dv2s_gym.loop.settings import DEFAULT_PROFILE, DEFAULTS, EVIDENCE, FINE_TUNE_METHODS, PROFILES, LoopSettings
+from dv2s_gym.loop.verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
 
 if TYPE_CHECKING:  # the loop itself loads the simulator and torch: not at the command line's start-up
-    from dv2s_gym.mining.loop import LoopReport
+    from dv2s_gym.loop.run import LoopReport
 
 __all__ = ["add_parser", "run", "loop_settings"]
 
@@ -142,7 +142,7 @@ def _add_arms_and_run_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run (or resume) the loop in ``--out``; print a summary, the verdict and the report paths. The exit status
     is the verdict's (:data:`EPILOG`)."""
-    from dv2s_gym.mining.loop import DEFAULT_OUT, run_loop
+    from dv2s_gym.loop.run import DEFAULT_OUT, run_loop
 
     out = args.out or DEFAULT_OUT
     report = run_loop(args.policy, loop_settings(args), out=out, progress=not args.no_progress)
@@ -159,7 +159,7 @@ given is ``None``)."""
 
 
 def loop_settings(args: argparse.Namespace):
-    """The :class:`~dv2s_gym.mining.loop_settings.LoopSettings` of ``dv2s loop``'s arguments: ``--profile``'s
+    """The :class:`~dv2s_gym.loop.settings.LoopSettings` of ``dv2s loop``'s arguments: ``--profile``'s
     values with every option given explicitly on top."""
     options = {key: getattr(args, key) for key in _VALUED if getattr(args, key) is not None}
     for flag in ("max_conversions", "max_replays"):
@@ -186,7 +186,7 @@ def _default(key: str, text: str) -> str:
 
 def summary_lines(report: "LoopReport") -> List[str]:
     """The terminal's summary of a finished loop: one line per round, the verdict, where the reports are."""
-    from dv2s_gym.mining.loop_report import round_summary
+    from dv2s_gym.loop.report import round_summary
 
     lines = [round_summary(record) for record in report.rounds]
     verdict = report.recommendation

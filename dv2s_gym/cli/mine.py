@@ -9,8 +9,8 @@ from dv2s_gym.cli.backend_options import dra_option, sg_option, worker_backend_o
 from dv2s_gym.cli.inputs import env_config_option, json_option, llm_config, output_folder
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from dv2s_gym.cli.parser import bank_option, llm_options
-from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.samplers import SAMPLERS, registered_samplers
+from dv2s_gym.mining.conversion.settings import ConversionSettings
+from dv2s_gym.mining.sampling.samplers import SAMPLERS, registered_samplers
 from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
 from dv2s_gym.registered_names import RegisteredNames
 from dv2s_gym.workers.settings import WorkerSettings
@@ -59,7 +59,7 @@ def add_parser(subparsers) -> None:
                    help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
                    "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
                    "warmup (0) and avoid (81: redraws past parameter cells that already failed; 0: off) "
-                   "(see dv2s_gym/mining/samplers.py)")
+                   "(see dv2s_gym/mining/sampling/samplers.py)")
     p.add_argument("--feedback", choices=list(FEEDBACKS), default=None,
                    help="what adaptive samplers learn from: robustness (every failure), novelty (a failure in a "
                    "parameter cell that already failed counts as an easy scene, to spread the search) or "

@@ -9,7 +9,7 @@ at the failure step and returns a short vector of numbers, each scaled to about 
      ego's heading minus the ego's / 20, |heading difference| / pi]
 
 (the actor: the one the failure names, else the nearest other one; without any other actor its five numbers
-are 0). The ``novelty-bandit`` sampler's feedback (:mod:`dv2s_gym.mining.novelty_sampler`) counts a failure
+are 0). The ``novelty-bandit`` sampler's feedback (:mod:`dv2s_gym.mining.sampling.novelty_sampler`) counts a failure
 as new when its descriptor is farther than :data:`NOVELTY_RADIUS` from every earlier failure's in the same
 scenario: novelty search over where the failure happened on the road, as quality-diversity methods do.
 

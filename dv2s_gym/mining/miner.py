@@ -13,7 +13,7 @@ The run is a folder (``out``)::
     report.json/.md/.html
 
 An adaptive sampler (cross-entropy, bandit, split, novelty-bandit) runs on the sliding-window schedule
-(``settings.json`` ``"schedule": "window"``, :mod:`dv2s_gym.mining.window`): ``batch`` scenes
+(``settings.json`` ``"schedule": "window"``, :mod:`dv2s_gym.mining.sampling.window`): ``batch`` scenes
 are drawn ahead, each outcome is fed back in index order as soon as every earlier one has
 been, and each outcome fed lets the sampler draw one more scene, which goes straight to a
 worker (a backend with ``streams = True``, the local pool; a backend that does not stream,
@@ -49,13 +49,13 @@ from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from dv2s_gym.mining import space as space_module
+from dv2s_gym.mining.sampling import space as space_module
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
-from dv2s_gym.mining.conversion_settings import ConversionSettings
-from dv2s_gym.mining.conversion_episodes import reference_passed
-from dv2s_gym.mining.conversion_files import cluster_slug, CONVERSION_DIR
-from dv2s_gym.mining.conversion_rejection import SETUP_ERRORS
-from dv2s_gym.mining.convert import convert_failure
+from dv2s_gym.mining.conversion.settings import ConversionSettings
+from dv2s_gym.mining.conversion.episodes import reference_passed
+from dv2s_gym.mining.conversion.files import cluster_slug, CONVERSION_DIR
+from dv2s_gym.mining.conversion.rejection import SETUP_ERRORS
+from dv2s_gym.mining.conversion.convert import convert_failure
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
@@ -63,11 +63,11 @@ from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
 from dv2s_gym.mining.monitors import kind_label, types_without_detector
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
-from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
+from dv2s_gym.mining.sampling.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
 from dv2s_gym.mining.settings import (DEFAULT_BATCH, FEEDBACKS, MineSettings, read_run_settings, RunOrigin,
                                       RunSettings, SETTINGS_FILE)
 from dv2s_gym.mining.tasks import MineTask
-from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
+from dv2s_gym.mining.sampling.window import SCHEDULES, WindowSchedule
 from dv2s_gym.mining.write_errors import from_os_error, is_write_failure, run_write_error
 from dv2s_gym.workers import backends
 from dv2s_gym.workers.errors import WorkerError
@@ -269,7 +269,7 @@ def _recorded(policy: str, settings: MineSettings, scenarios: Sequence[str],
 @dataclass(frozen=True)
 class _Mining:
     """A run being mined: its folder, policy, settings (batch, scenarios and bank as resolved), schedule
-    (:data:`~dv2s_gym.mining.window.SCHEDULES`) and scene space."""
+    (:data:`~dv2s_gym.mining.sampling.window.SCHEDULES`) and scene space."""
 
     out: Path
     policy: str
@@ -674,7 +674,7 @@ def _run_episodes(mining: _Mining, done: Dict[int, EpisodeRecord], workers: Work
 
 def _with_proposal(spec, proposal: Optional[Dict[str, Any]]):
     """``spec`` with the density its point was drawn with, over the scenario's own coordinates (importance
-    weights of the failure-rate estimate, :mod:`dv2s_gym.mining.rate`)."""
+    weights of the failure-rate estimate, :mod:`dv2s_gym.mining.sampling.rate`)."""
     spec.proposal = scene_proposal(proposal, len(spec.point))
     return spec
 
@@ -723,7 +723,7 @@ def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: 
     and ``env_config`` replaced by the run's); the conversion records.
 
     The representative is the cluster's most severe failure (lowest robustness, then
-    lowest index) among those whose scene the reference driver passed (:func:`~dv2s_gym.mining.convert.reference_passed`;
+    lowest index) among those whose scene the reference driver passed (:func:`~dv2s_gym.mining.conversion.convert.reference_passed`;
     among all when there is none: the converted script is judged all the same, but no exact replay is kept). Clusters with more avoidable failures go first; at most
     ``max_conversions`` conversions are made in the run (``None``: every cluster). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
     resumed run converts the remaining clusters only.

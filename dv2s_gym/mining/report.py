@@ -37,7 +37,7 @@ JSON schema ``dv2s-mine-report``, version 3 (:data:`SCHEMA_VERSION`; a change to
       "scenarios": {name: Scenario},
       "failure_rate": {"available", "reason", "overall": Estimate, "scenarios": {name: Estimate}}
                                           the failure rate under the scenarios' own parameter distributions
-                                          (:mod:`dv2s_gym.mining.rate`),
+                                          (:mod:`dv2s_gym.mining.sampling.rate`),
       "clusters": [Cluster]               clusters with at least one failure not known to be unavoidable,
       "unavoidable_clusters": [Cluster]   clusters whose failures the reference driver had too,
       "failures": [Failure]               failures not known to be unavoidable (avoidable or unknown),
@@ -102,7 +102,7 @@ from dv2s_gym.mining.cluster import cluster_failures
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family
 from dv2s_gym.mining.html import write_html
-from dv2s_gym.mining.rate import FailureRate, rate_estimates
+from dv2s_gym.mining.sampling.rate import FailureRate, rate_estimates
 from dv2s_gym.mining.report_record import MineReport
 from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, by_type_text, error_warning,
                                          not_compared_counts, parameter_check_text, rate_text, seed_text)

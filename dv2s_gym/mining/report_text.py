@@ -31,7 +31,7 @@ NOT_COMPARED_REASONS: Tuple[Tuple[str, Tuple[str, ...], str], ...] = (
     ("other", (), "for another reason"),
 )
 """``(key, phrases of the conversion judge's reasons, words)`` of each reason a failing parameter was not compared
-with the new script (:func:`dv2s_gym.mining.conversion_parameters.compare_parameters`' ``not_comparable``), in the order
+with the new script (:func:`dv2s_gym.mining.conversion.parameters.compare_parameters`' ``not_comparable``), in the order
 the reports list them."""
 
 

@@ -9,10 +9,10 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Dict, List, Mapping, Optional, Tuple, Type, Union
 
-from dv2s_gym.mining.conversion_settings import ConversionSettings
+from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, MonitorSettings
-from dv2s_gym.mining.samplers import default_feedback, registered_samplers
+from dv2s_gym.mining.sampling.samplers import default_feedback, registered_samplers
 from scenario_bank.field_checks import (check_bool, check_int, check_mapping, check_names,
                                         check_number, check_path, check_text)
 from scenario_bank.run_identity import recorded_settings, resume_keys, setting
@@ -56,14 +56,14 @@ class MineSettings:
     budget: int = setting(200, resume=False)
     """Episodes to run in total (at least 1)."""
     sampler: str = "novelty-bandit"
-    """One of :func:`~dv2s_gym.mining.samplers.registered_samplers` (``novelty-bandit``: broader failures than VerifAI's
+    """One of :func:`~dv2s_gym.mining.sampling.samplers.registered_samplers` (``novelty-bandit``: broader failures than VerifAI's
     cross-entropy on the breadth bench, bench/RESULTS.md)."""
     sampler_options: Optional[Mapping[str, Any]] = setting(None, record=lambda options: dict(options or {}) or None)
     """Parameters of an adaptive sampler (VerifAI's ``alpha``, ``buckets``, ``thres``;
-    :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: the sampler's defaults."""
+    :func:`~dv2s_gym.mining.sampling.samplers.sampler_params`); ``None``: the sampler's defaults."""
     feedback: Optional[str] = None
     """What the adaptive samplers learn from (:data:`FEEDBACKS`); ``None`` becomes the sampler's default
-    (:func:`~dv2s_gym.mining.samplers.default_feedback`)."""
+    (:func:`~dv2s_gym.mining.sampling.samplers.default_feedback`)."""
     scenarios: Optional[Tuple[str, ...]] = None
     """Bank names or ``tag:<tag>`` (``None``: the whole bank, or a resumed run's own)."""
     bank_dir: Optional[str] = None
@@ -81,10 +81,10 @@ class MineSettings:
     stall_seconds: float = DEFAULT_STALL_SECONDS
     """Seconds standing with a free lane ahead that count as a stall."""
     convert: bool = setting(False, resume=False, record=False)
-    """Turn one failure per avoidable cluster into a bank scenario (:mod:`dv2s_gym.mining.convert`); ``bank_dir``
+    """Turn one failure per avoidable cluster into a bank scenario (:mod:`dv2s_gym.mining.conversion.convert`); ``bank_dir``
     must then be given and writable (a new or empty folder starts as a copy of the shipped bank)."""
     conversion: ConversionSettings = setting(default_factory=ConversionSettings, resume=False, record=False)
-    """How failures are converted (:class:`~dv2s_gym.mining.conversion_settings.ConversionSettings`: the DRA and
+    """How failures are converted (:class:`~dv2s_gym.mining.conversion.settings.ConversionSettings`: the DRA and
     SG backends, ``k``...); the run's policy and ``env_config`` replace its own."""
     max_conversions: Optional[int] = setting(None, resume=False, record=False)
     """At most this many clusters are converted, largest first (``None``: all)."""

@@ -1,6 +1,6 @@
 """Episodes of the miner and the loop in a worker process: :func:`run_mine_task` (one
 failure-mining episode, task kind ``"mine"``) and :func:`heldout_task` (one episode of the loop's
-held-out evaluation, kind ``"heldout"``, see :mod:`dv2s_gym.mining.heldout`), both registered with
+held-out evaluation, kind ``"heldout"``, see :mod:`dv2s_gym.loop.heldout`), both registered with
 :mod:`dv2s_gym.workers.tasks` when this module is imported.
 
 A mining task is a :class:`MineTask` (the episode's scene and what the worker needs to run and judge it); a pool of
