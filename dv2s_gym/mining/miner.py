@@ -723,7 +723,7 @@ def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: 
     and ``env_config`` replaced by the run's); the conversion records.
 
     The representative is the cluster's most severe failure (lowest robustness, then
-    lowest index) among those whose scene the reference driver passed (:func:`~dv2s_gym.mining.conversion.convert.reference_passed`;
+    lowest index) among those whose scene the reference driver passed (:func:`~dv2s_gym.mining.conversion.episodes.reference_passed`;
     among all when there is none: the converted script is judged all the same, but no exact replay is kept). Clusters with more avoidable failures go first; at most
     ``max_conversions`` conversions are made in the run (``None``: every cluster). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
     resumed run converts the remaining clusters only.
