@@ -30,17 +30,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import integrate, stats
 
+from policies.stats import check_level, two_sided_z
 from dv2s_gym.regress.stats import (
     _VERDICT_OF_CODE,
     DEFAULT_ALPHA,
     DEFAULT_CORRELATION,
     DEFAULT_MARGIN,
     Verdict,
-    _check_level,
     _decide,
     _mcnemar_greater,
     _newcombe_bounds,
-    _two_sided_z,
     wilson_interval,
 )
 
@@ -125,7 +124,7 @@ def _check_design(p_baseline: float, delta: float, alpha: float, power: float) -
     _check_rates(p_baseline, p_baseline + delta)
     if delta <= 0:
         raise ValueError(f"delta (the increase in failure rate to detect) must be positive, got {delta}")
-    return float(stats.norm.isf(_check_level(alpha, "alpha"))), float(stats.norm.ppf(_check_level(power, "power")))
+    return float(stats.norm.isf(check_level(alpha, "alpha"))), float(stats.norm.ppf(check_level(power, "power")))
 
 
 def paired_sample_size(
@@ -260,7 +259,7 @@ def verdicts_of_tables(tables: np.ndarray, margin: float, alpha: float = DEFAULT
 def _verdict_codes(tables: np.ndarray, margin: float, alpha: float) -> np.ndarray:
     a, b, c, d = tables.T
     n = tables.sum(axis=1)
-    _, upper = _newcombe_bounds(a, b, c, d, _two_sided_z(1.0 - alpha))
+    _, upper = _newcombe_bounds(a, b, c, d, two_sided_z(1.0 - alpha))
     difference = (b - c) / np.where(n > 0, n, 1)
     return _decide(upper, difference, _mcnemar_greater(b, c), margin, alpha)
 
@@ -313,7 +312,7 @@ def simulate_verdict_rates(
         A :class:`MonteCarloRate` per verdict.
     """
     tables = simulate_tables(n_episodes, p_baseline, p_candidate, correlation, repetitions, rng)
-    codes = _verdict_codes(tables, margin, _check_level(alpha, "alpha"))
+    codes = _verdict_codes(tables, margin, check_level(alpha, "alpha"))
     return {verdict: MonteCarloRate(int(np.sum(codes == code)), repetitions)
             for code, verdict in _VERDICT_OF_CODE.items()}
 
