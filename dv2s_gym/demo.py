@@ -1,4 +1,4 @@
-"""The main job on embedded defaults: every bank scenario, a rule-based ego, a video each."""
+"""`dv2s demo`: every bank scenario driven by the rule-based ego, a video of each and a table of how each went."""
 
 from __future__ import annotations
 

@@ -213,3 +213,25 @@ def test_dv2s_says_when_a_plugin_replaces_the_collision_detector(tmp_path):
     assert done.returncode == 0, done.stderr
     assert ("dv2s: warning: the built-in detector 'collision' was replaced by noop_collision: what runs as "
             "'collision' is not dv2s-gym's own" in done.stderr)
+
+
+def test_a_worker_imports_a_plug_in_that_replaces_a_built_in_without_saying_it_again(tmp_path, monkeypatch):
+    """The process that starts the workers prints the replacement once (``dv2s: warning:``); each worker imports
+    the same plug-in and stays quiet, while the replacement itself holds there."""
+    import sys
+    import warnings
+
+    from dv2s_gym.workers.tasks import start_plugins
+
+    (tmp_path / "replacing_widget_plugin.py").write_text(
+        "from scenario_bank.named_registry import Registry\n"
+        "TABLE = Registry('widget', LookupError, {'one': 1})\n"
+        "TABLE.register('one', 10, overwrite=True, module='replacing_widget_plugin')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.warns(BuiltInReplacedWarning):  # in the process that loads it first
+        __import__("replacing_widget_plugin")
+    del sys.modules["replacing_widget_plugin"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", BuiltInReplacedWarning)
+        start_plugins(["replacing_widget_plugin"])
+    assert sys.modules.pop("replacing_widget_plugin").TABLE["one"] == 10

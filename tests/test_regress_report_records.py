@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+import dv2s_gym.regress.report as report_module
 from dv2s_gym.regress.errors import ReportMismatchError
 from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, PairedEpisode, PolicyInfo,
                                       RegressReport, ReportSettings, ScenarioResult, SequentialOutcome, Summary)
@@ -131,3 +132,10 @@ def test_the_consumers_read_a_record_and_its_json_alike():
     assert summary["new_failure_rate"] == report.overall.candidate.failure_rate
     roles = {"baseline": "start", "candidate": "fine_tuned"}
     assert loop._regress_errored(report, roles) == loop._regress_errored(as_json, roles)
+
+
+def test_the_report_format_documented_in_the_module_is_the_version_written():
+    """The module docstring is the format's specification: its version is the one the code writes."""
+    doc = report_module.__doc__
+    assert f"version {report_module.SCHEMA_VERSION} (:data:`SCHEMA_VERSION`" in doc
+    assert f'"schema_version": {report_module.SCHEMA_VERSION},' in doc

@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _replay_mined(args: argparse.Namespace, folder) -> int:
-    from dv2s_gym.mining.conversion.episode_replay import replay_mined_episode
+    from dv2s_gym.mining.episode_replay import replay_mined_episode
 
     record, policy = replay_mined_episode(folder, args.episode, policy=args.policy_spec, video=args.video)
     failure = record.get("failure") or {}

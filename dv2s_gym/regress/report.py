@@ -4,11 +4,11 @@
 :mod:`dv2s_gym.regress.records`, read by attribute); its ``to_json()`` is the JSON object below, key for key and in
 this order, and :func:`load_report` reads a ``report.json`` back into one.
 
-JSON schema ``dv2s-regress``, version 1 (:data:`SCHEMA_VERSION`; a change to any key below
+JSON schema ``dv2s-regress``, version 2 (:data:`SCHEMA_VERSION`; a change to any key below
 bumps it, and ``--baseline-report`` refuses a report of another version)::
 
     {
-      "schema": "dv2s-regress", "schema_version": 1,
+      "schema": "dv2s-regress", "schema_version": 2,
       "created": ISO-8601 time (UTC), "dv2s_version": "0.1.0",
       "bank": {"path": bank folder, "version": SHA-256 over the scenarios used (name + script),
                "scenarios": [names], "hashes": {name: SHA-256 of its script}},

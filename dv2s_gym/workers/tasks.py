@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from typing import Any, Callable, Dict, List, Mapping, Sequence
 
 from dv2s_gym.workers.errors import WorkerError
+from scenario_bank.errors import BuiltInReplacedWarning
 from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import PluginError, check_plugins, import_plugins
 
@@ -87,7 +89,10 @@ def start_plugins(modules: Sequence[str]) -> None:
         WorkerError: naming the module that cannot be imported here, and why.
     """
     try:
-        import_plugins(modules, where="a worker process")
+        with warnings.catch_warnings():
+            # the process that started the workers has said that a plug-in replaced a built-in; once is enough
+            warnings.simplefilter("ignore", BuiltInReplacedWarning)
+            import_plugins(modules, where="a worker process")
     except PluginError as error:
         raise WorkerError(str(error)) from None
 

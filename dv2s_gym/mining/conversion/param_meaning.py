@@ -53,7 +53,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
            "script_parameters", "affine_uses", "Affine", "quantity_uses", "key_parameters", "key_uses",
-           "actor_objects", "counterpart_objects", "fixed_quantities", "object_behaviours", "script_objects",
+           "actor_objects", "counterpart_objects", "fixed_quantities", "script_objects",
            "behaviour_overrides", "object_behaviour_heads", "DEFAULT_LENGTHS", "object_lengths", "placements",
            "lengths_along"]
 
@@ -649,36 +649,6 @@ def _less_half(item: Tuple[str, Optional[str]], own: Optional[float]) -> Tuple[s
     if slot != "longitudinal" or text is None:
         return item
     return (slot, f"({text}) - {own / 2:.12g}" if own is not None else None)
-
-
-def object_behaviours(script: str) -> Dict[str, str]:
-    """``{object: its behaviour's definition}``: the text of the ``behavior`` the object is given (its name replaced,
-    its lines joined without their indentation), or the behaviour's name when the script does not define it (a
-    library behaviour: ``FollowLaneBehavior``). Two scripts' behaviour arguments mean the same only when their
-    objects run the same definition: a behaviour written anew may read its arguments another way (a drift ``depth``
-    toward the ego's lane, or to the left)."""
-    lines = script.splitlines()
-    bodies: Dict[str, str] = {}
-    for index, line in enumerate(lines):
-        head = _BEHAVIOR.match(line)
-        if head is None:
-            continue
-        body = [re.sub(rf"\b{re.escape(head.group(1))}\b", "_", line.strip())]
-        for following in lines[index + 1:]:
-            if following.strip() and not following[0].isspace():
-                break
-            if following.strip() and not following.strip().startswith("#"):
-                body.append(following.strip())
-        bodies[head.group(1)] = "\n".join(body)
-    out: Dict[str, str] = {}
-    for statement in top_statements(script):
-        found = _OBJECT.match(statement)
-        if found is None or statement.startswith(_SKIP):
-            continue
-        called = re.search(r"\bwith\s+behavior\s+(\w+)", found.group(3))
-        if called:
-            out[found.group(1) or f"<{found.group(2)}>"] = bodies.get(called.group(1), called.group(1))
-    return out
 
 
 _REASSIGN = re.compile(r"^(\w+)\s*([-+*/]?=)(?!=)\s*(.+)$")
