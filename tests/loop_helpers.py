@@ -19,9 +19,12 @@ from scenario_bank.bank import Bank, content_hash
 
 
 def written_report(body: Dict[str, Any]) -> Dict[str, Any]:
-    """A loop report's ``body`` with its recommendation, as the loop writes every ``report.json``."""
+    """A loop report's ``body`` with its recommendation, as the loop writes every ``report.json``; the settings
+    the body does not give are the defaults, as ``loop.json`` records every setting."""
+    from dv2s_gym.loop.settings import LoopSettings
     from dv2s_gym.loop.verdict import recommendation
 
+    body = {**body, "settings": {**LoopSettings().recorded(), **body.get("settings", {})}}
     return {**body, "recommendation": recommendation(body).to_dict()}
 
 

@@ -12,10 +12,14 @@ from pathlib import Path
 
 from dv2s_gym.loop.record import RecordedLoopSettings, RoundRecord
 from dv2s_gym.loop.report import final_vs_start, write_loop_reports
+from dv2s_gym.loop.settings import LoopSettings
 from dv2s_gym.regress.report import build_report, write_json
 
 NAMES = ["scenario_a", "scenario_b"]
 SEEDS = [0, 1, 2, 3]
+
+LOOP_SETTINGS = {**LoopSettings().recorded(), "policy": "p0"}
+"""The settings a loop records (every one), started from ``p0``."""
 
 
 def _result(failed: bool) -> dict:
@@ -44,7 +48,7 @@ def _loop(tmp_path: Path, rounds: int, hashes2=None) -> dict:
     if rounds > 1:
         records.append({"round": 2, "policy": "p1", "new_policy": "p2", "steps": {"regress": {
             "verdict": "FAIL", "report": _regress(tmp_path / "r2.json", "p2", "p1", P2_FAILS, P1_FAILS, hashes2)}}})
-    return {"schema": "dv2s-loop", "schema_version": 1, "settings": {"policy": "p0"}, "policy": records[-1]["new_policy"],
+    return {"schema": "dv2s-loop", "schema_version": 1, "settings": LOOP_SETTINGS, "policy": records[-1]["new_policy"],
             "rounds": records}
 
 
@@ -146,7 +150,7 @@ def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_direct
         _regress(stored, f"p{number}", policy, fails, base_fails)
         rounds.append(_accepted({"round": number, "policy": policy, "new_policy": f"p{number}",
                                  "steps": {"regress": {"report": str(stored)}}}))
-    body = {"settings": {"policy": "p0"}, "policy": "p2", "rounds": rounds}
+    body = {"settings": LOOP_SETTINGS, "policy": "p2", "rounds": rounds}
     (tmp_path / "out").rename(tmp_path / "moved")  # the loop folder moved after the run
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()

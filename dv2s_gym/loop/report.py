@@ -384,7 +384,7 @@ def round_summary(record: RoundRecord) -> str:
 
 def _replays_text(settings: Mapping[str, Any]) -> str:
     """How many clusters beyond the converted ones a round keeps as exact replays, in words."""
-    count = settings.get("max_replays", 0)
+    count = settings["max_replays"]
     if count == 0:
         return "no exact replays beyond the converted clusters"
     return f"{'every other cluster' if count is None else f'at most {count} other clusters'} kept as exact replays"
@@ -552,8 +552,8 @@ def _recommendation(report: Mapping[str, Any]) -> Recommendation:
 
 def _floor_lines(settings: Mapping[str, Any]) -> List[str]:
     """The report's loud line when the held-out minimums are below what can ever give evidence, or none."""
-    note = evidence_floor_note(int(settings.get("min_heldout_episodes", 0) or 0),
-                               int(settings.get("min_heldout_families", 0) or 0))
+    note = evidence_floor_note(int(settings["min_heldout_episodes"]),
+                               int(settings["min_heldout_families"]))
     return [f"**WARNING: {note}.**", ""] if note else []
 
 
@@ -577,10 +577,10 @@ def _settings_lines(settings: Mapping[str, Any]) -> List[str]:
         f"{_replays_text(settings)}, "
         f"{settings.get('holdout_fraction')} of the mined families (parent scenarios) "
         f"held out, {settings.get('k_eval')} evaluation seeds per held-out scenario (at least "
-        f"{settings.get('min_heldout_episodes', 0)} held-out episodes from at least "
-        f"{settings.get('min_heldout_families', 0)} families for a drop or test), "
+        f"{settings['min_heldout_episodes']} held-out episodes from at least "
+        f"{settings['min_heldout_families']} families for a drop or test), "
         f"{'a control arm fine-tuned without the mined scenarios, ' if settings.get('control') else 'no control arm, '}"
-        f"fine-tuning ({settings.get('fine_tune_method', 'ppo')}) "
+        f"fine-tuning ({settings['fine_tune_method']}) "
         f"{settings.get('fine_tune_steps')} steps (mined scenarios drawn with "
         f"probability {settings.get('mined_share')}, reward terms {_weights(settings.get('fine_tune_reward'))} "
         f"overriding the policy's own in training only), regression test on the starting bank with "
@@ -925,14 +925,14 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
             f"{escape(str(advice.policy))}</code></p><p>Mining budget {settings.get('budget')} "
             f"episodes per round, at most {escape(str('every' if settings.get('max_conversions') is None else settings.get('max_conversions')))} cluster(s) "
             f"converted, {escape(_replays_text(settings))}, "
-            f"fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "
+            f"fine-tuning ({escape(str(settings['fine_tune_method']))}) "
             f"{settings.get('fine_tune_steps')} steps (reward terms "
             f"{escape(_weights(settings.get('fine_tune_reward')))} overridden in training only), "
             f"{'with' if settings.get('control') else 'without'} a control arm, {settings.get('k_eval')} "
             f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
             f"held-out families, the unit the split holds out; the McNemar p-values pair episodes, and pairs within "
-            f"a family are not independent; no drop or test below {settings.get('min_heldout_episodes', 0)} held-out episodes or "
-            f"{settings.get('min_heldout_families', 0)} held-out families).</p>"
+            f"a family are not independent; no drop or test below {settings['min_heldout_episodes']} held-out episodes or "
+            f"{settings['min_heldout_families']} held-out families).</p>"
             + "".join(f"<p><strong>{escape(line.strip('*'))}</strong></p>" for line in _floor_lines(settings)[:1]) +
             f"<table>{head}{''.join(rows)}</table>{final_html}{''.join(details)}</body></html>\n")
 
