@@ -33,52 +33,52 @@ import pytest
 from scenario_bank.records import JsonRecord
 
 ROOT = Path(__file__).resolve().parents[1]
-MINING = ROOT / "dv2s_gym" / "mining"
+DV2S_GYM = ROOT / "dv2s_gym"
 
-TYPED_MODULES = ("behaviour", "cluster", "family", "rate", "report", "split", "loop", "loop_record", "loop_report",
-                 "loop_verdict", "miner")
-"""The mining modules whose functions pass typed records."""
+TYPED_MODULES = ("mining.behaviour", "mining.cluster", "mining.family", "mining.sampling.rate", "mining.report",
+                 "mining.miner", "loop.split", "loop.run", "loop.record", "loop.report", "loop.verdict")
+"""The modules of the miner and the loop (under ``dv2s_gym``) whose functions pass typed records."""
 
 JSON_BOUNDARIES: Dict[str, str] = {
-    "report.read_jsonl": "reads the JSON objects of a run's .jsonl files: the file format",
-    "report.read_run": "returns the run's conversion records as read; their format is owned by the conversion "
+    "mining.report.read_jsonl": "reads the JSON objects of a run's .jsonl files: the file format",
+    "mining.report.read_run": "returns the run's conversion records as read; their format is owned by the conversion "
                        "(dv2s_gym.mining.conversion.convert), which has no typed record for them yet",
-    "report.build_report_from_records": "takes the run's settings.json and conversion records as read",
-    "report.headline": "renders a MineReport or the JSON object report.json holds",
-    "report.format_summary": "renders a MineReport or the JSON object report.json holds",
-    "report.markdown": "renders a MineReport or the JSON object report.json holds",
-    "report.write_reports": "writes a MineReport, or the JSON object report.json holds, and its renderings",
-    "rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
-    "miner.convert_clusters": "returns the run's conversion records as conversions.jsonl holds them; their format "
+    "mining.report.build_report_from_records": "takes the run's settings.json and conversion records as read",
+    "mining.report.headline": "renders a MineReport or the JSON object report.json holds",
+    "mining.report.format_summary": "renders a MineReport or the JSON object report.json holds",
+    "mining.report.markdown": "renders a MineReport or the JSON object report.json holds",
+    "mining.report.write_reports": "writes a MineReport, or the JSON object report.json holds, and its renderings",
+    "mining.sampling.rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
+    "mining.miner.convert_clusters": "returns the run's conversion records as conversions.jsonl holds them; their format "
                               "is owned by the conversion (dv2s_gym.mining.conversion.convert), which has no typed record for "
                               "them yet",
-    "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
-    "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
-    "loop.heldout_comparison": "takes the held-out store's rows (heldout.jsonl; HeldOutEpisode records or their "
+    "loop.run.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
+    "loop.run.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
+    "loop.run.heldout_comparison": "takes the held-out store's rows (heldout.jsonl; HeldOutEpisode records or their "
                                "JSON objects)",
-    "loop.untouched_settings": "takes the policy's env config, a JSON object of its model card",
-    "loop_record.HeldOutComparison.held_out_test": "returns one recorded held-out test (loop_verdict.heldout_worse's "
+    "loop.run.untouched_settings": "takes the policy's env config, a JSON object of its model card",
+    "loop.record.HeldOutComparison.held_out_test": "returns one recorded held-out test (loop_verdict.heldout_worse's "
                                                    "JSON object in the after step's significantly_worse)",
-    "loop_record.RoundRecord.with_cross_round_check": "takes the cross-round check as report.json records it in a "
+    "loop.record.RoundRecord.with_cross_round_check": "takes the cross-round check as report.json records it in a "
                                                       "round (loop_report.final_vs_start's JSON object)",
-    "loop_verdict.family_harm": "returns the held-out families' harm check as loop.json records it in a held-out test",
-    "loop_verdict.heldout_worse": "returns a held-out test as loop.json records it (significantly_worse)",
-    "loop_verdict.recommendation": "takes the body of report.json (and returns its typed Recommendation)",
-    "loop_report.final_vs_start": "takes the body of report.json and returns its final_vs_start object",
-    "loop_report.with_cross_round_checks": "takes and returns the body of report.json",
-    "loop_report.render_markdown": "renders the body of report.json",
-    "loop_report.render_html": "renders the body of report.json",
-    "loop_report.round_clips": "takes the body of report.json",
-    "loop_report.write_loop_reports": "writes the body of report.json and its renderings",
+    "loop.verdict.family_harm": "returns the held-out families' harm check as loop.json records it in a held-out test",
+    "loop.verdict.heldout_worse": "returns a held-out test as loop.json records it (significantly_worse)",
+    "loop.verdict.recommendation": "takes the body of report.json (and returns its typed Recommendation)",
+    "loop.report.final_vs_start": "takes the body of report.json and returns its final_vs_start object",
+    "loop.report.with_cross_round_checks": "takes and returns the body of report.json",
+    "loop.report.render_markdown": "renders the body of report.json",
+    "loop.report.render_html": "renders the body of report.json",
+    "loop.report.round_clips": "takes the body of report.json",
+    "loop.report.write_loop_reports": "writes the body of report.json and its renderings",
 }
 """``"module.function"`` of the typed modules that take or return a JSON object, each with the reason. A record's
 ``to_dict`` (its JSON form) needs no entry."""
 
 EPISODE_READERS = {
-    "behaviour.behaviour_of": "record", "family.record_family": "record", "cluster.cluster_id": "record",
-    "cluster.cell_id": "record", "cluster.pair_of": "record", "cluster.cluster_failures": "records",
-    "cluster.group": "records", "rate.failure_rate": "records", "rate.rate_estimates": "records",
-    "report.build_report_from_records": "episodes",
+    "mining.behaviour.behaviour_of": "record", "mining.family.record_family": "record", "mining.cluster.cluster_id": "record",
+    "mining.cluster.cell_id": "record", "mining.cluster.pair_of": "record", "mining.cluster.cluster_failures": "records",
+    "mining.cluster.group": "records", "mining.sampling.rate.failure_rate": "records", "mining.sampling.rate.rate_estimates": "records",
+    "mining.report.build_report_from_records": "episodes",
 }
 """``"module.function": parameter`` of the functions that read episode records: each is annotated with
 :class:`~scenario_bank.records.EpisodeRecord`."""
@@ -122,7 +122,7 @@ def json_object_functions(source: str) -> List[str]:
 
 
 def _source(module: str) -> str:
-    return (MINING / f"{module}.py").read_text(encoding="utf-8")
+    return (DV2S_GYM / (module.replace(".", "/") + ".py")).read_text(encoding="utf-8")
 
 
 def test_the_check_sees_a_json_object_taken_or_returned():
@@ -156,7 +156,7 @@ def test_the_typed_modules_pass_typed_records():
 def test_the_functions_that_read_episodes_take_episode_records():
     untyped = []
     for qualified, parameter in EPISODE_READERS.items():
-        module, name = qualified.split(".")
+        module, name = qualified.rsplit(".", 1)
         node = _public_functions(ast.parse(_source(module)))[name]
         annotation = next(a.annotation for a in node.args.args + node.args.kwonlyargs if a.arg == parameter)
         if "EpisodeRecord" not in ast.unparse(annotation):
@@ -316,7 +316,7 @@ def test_the_keyed_read_check_sees_settings_and_tasks_read_by_key():
 
 def test_the_miner_reads_its_settings_and_tasks_by_their_fields():
     """No setting, task field or origin is read by a string key in the miner (settings.json is written whole)."""
-    assert keyed_reads(_source("miner")) == []
+    assert keyed_reads(_source("mining.miner")) == []
     from dv2s_gym.mining.miner import MineRun
     from dv2s_gym.mining.settings import MineSettings
 
