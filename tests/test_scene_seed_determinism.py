@@ -22,7 +22,7 @@ import dv2s_gym  # noqa: F401  (registers DV2S-v0)
 from envs.scenarios import compile_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
-UNTOUCHED = ROOT / "dv2s_gym" / "mining" / "untouched" / "nhtsa_pedestrian__pedestrian_02" / "scenario.scenic"
+UNTOUCHED = ROOT / "dv2s_gym" / "loop" / "untouched" / "nhtsa_pedestrian__pedestrian_02" / "scenario.scenic"
 BANK = ROOT / "scenario_bank" / "scenarios" / "highway_adjacent_car_drifts" / "scenario.scenic"
 
 
