@@ -27,7 +27,7 @@ from highway_env.envs.common.observation import KinematicObservation
 
 import envs.rendering  # noqa: F401  (sets SDL/XDG variables before any viewer starts pygame)
 from envs.config_check import RENDER_MODES, check_config, check_render_mode
-from envs.errors import InvalidActionError, ResetNeededError, SceneSamplingError
+from envs.errors import InvalidActionError, InvalidSeedError, ResetNeededError, SceneSamplingError
 from scenario_bank.errors import WrongTypeError
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation
@@ -392,6 +392,9 @@ class DV2SEnv(AbstractEnv):
         the script's random global parameters (``param x = Range(a, b)``) for this
         scene (used by failure mining; see ``CompiledScenario.parameter_ranges``).
         """
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+            raise InvalidSeedError(f"reset(seed={seed!r}): a seed is an integer >= 0 (the same seed gives the same "
+                                   "scene), or None for a fresh random one")
         self._reset_seed = seed
         self._reset_options = dict(options or {})
         obs, info = super().reset(seed=seed, options=options)

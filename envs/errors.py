@@ -10,6 +10,7 @@ __all__ = [
     "UnsupportedConstructError",
     "SceneSamplingError",
     "InvalidActionError",
+    "InvalidSeedError",
     "UnknownConfigKeyError",
     "UnknownRenderModeError",
     "ResetNeededError",
@@ -46,6 +47,10 @@ class SceneSamplingError(DV2SError, RuntimeError):
 
 class InvalidActionError(DV2SError, ValueError):
     """An action outside the environment's action space."""
+
+
+class InvalidSeedError(DV2SError, ValueError):
+    """A ``reset(seed=...)`` that is not an integer >= 0."""
 
 
 class UnknownConfigKeyError(DV2SError, ValueError):

@@ -19,6 +19,7 @@ from envs.dv2s_env import DV2SEnv  # noqa: E402
 from envs.errors import (  # noqa: E402
     DV2SError,
     InvalidActionError,
+    InvalidSeedError,
     ScenarioCompileError,
     SceneSamplingError,
     UnsupportedConstructError,
@@ -307,3 +308,21 @@ def test_a_behaviour_looping_without_an_action_is_stopped_and_named(tmp_path):
     import signal
 
     assert signal.getitimer(signal.ITIMER_PROF) == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("seed", [-5, 1.5, "3", True, np.int64(3)])
+def test_a_seed_that_is_not_an_integer_at_least_zero_is_refused_naming_it(seed):
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES)
+    with pytest.raises(InvalidSeedError, match=r"reset\(seed=.*\): a seed is an integer >= 0"):
+        env.reset(seed=seed)
+    assert env.reset(seed=3)[1]["action"] is None  # and the env is still usable
+    env.close()
+
+
+def test_dv2s_run_refuses_a_negative_seed_in_one_line():
+    import subprocess
+
+    done = subprocess.run([sys.executable, "-m", "dv2s_gym.cli", "run", BRAKES, "--seed", "-5"], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines()[-1].startswith("dv2s: error: reset(seed=-5): a seed is an integer >= 0")
