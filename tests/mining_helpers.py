@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import random
 from pathlib import Path
 from typing import Any, Tuple
@@ -9,6 +10,7 @@ from typing import Any, Tuple
 import numpy as np
 import pytest
 
+import dv2s_gym.mining.sampling.space as space_module
 from dv2s_gym.mining import miner as miner_module
 from dv2s_gym.mining.jsonl import JsonlAppender
 from dv2s_gym.mining.settings import MineSettings
@@ -61,3 +63,22 @@ def seed_globals_and_peek(seed: int) -> Tuple[float, float]:
     random.seed(seed)
     np.random.seed(seed)
     return before
+
+
+class SpaceBuilt(Exception):
+    """Raised where a mining run would build its scene space: every resume check of ``mine`` comes before it."""
+
+
+def recorded_run_folder(out: Path, scenarios: Tuple[str, ...], monkeypatch: Any) -> Path:
+    """``out`` as a mining run folder whose ``settings.json`` a seed-0 run of ``rule`` over ``scenarios`` wrote;
+    building a scene space then raises :class:`SpaceBuilt`, so a test sees the resume checks and nothing after."""
+    (out / "traces").mkdir(parents=True)
+    recorded = miner_module._recorded("rule", MineSettings(budget=2, scenarios=scenarios, seed=0, batch=4),
+                                      scenarios, {})
+    (out / "settings.json").write_text(json.dumps(recorded), encoding="utf-8")
+
+    def no_space(*args: Any, **kwargs: Any) -> None:
+        raise SpaceBuilt()
+
+    monkeypatch.setattr(space_module, "SceneSpace", no_space)
+    return out

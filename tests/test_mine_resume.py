@@ -2,35 +2,21 @@
 
 from __future__ import annotations
 
-import json
-
 import pytest
 
-import dv2s_gym.mining.sampling.space as space_module
-from dv2s_gym.mining.miner import _recorded, mine
+from mining_helpers import SpaceBuilt, recorded_run_folder
+from dv2s_gym.mining.miner import mine
 from dv2s_gym.mining.settings import MineSettings
 from scenario_bank.run_identity import RunIdentityError
 
 SCENARIOS = ("highway_lead_vehicle_brakes",)
 
 
-class _SpaceBuilt(Exception):
-    pass
-
 
 @pytest.fixture
 def run_folder(tmp_path, monkeypatch):
-    """A run folder whose settings.json a seed-0 run wrote; building a scene space raises :class:`_SpaceBuilt`."""
-    out = tmp_path / "run"
-    (out / "traces").mkdir(parents=True)
-    recorded = _recorded("rule", MineSettings(budget=2, scenarios=SCENARIOS, seed=0, batch=4), SCENARIOS, {})
-    (out / "settings.json").write_text(json.dumps(recorded), encoding="utf-8")
-
-    def no_space(*args, **kwargs):
-        raise _SpaceBuilt()
-
-    monkeypatch.setattr(space_module, "SceneSpace", no_space)
-    return out
+    """A run folder whose settings.json a seed-0 run wrote; building a scene space raises :class:`SpaceBuilt`."""
+    return recorded_run_folder(tmp_path / "run", SCENARIOS, monkeypatch)
 
 
 def test_a_changed_seed_is_refused_before_the_space_is_built(run_folder):
@@ -40,6 +26,6 @@ def test_a_changed_seed_is_refused_before_the_space_is_built(run_folder):
 
 
 def test_the_same_settings_go_on_to_build_the_space(run_folder):
-    with pytest.raises(_SpaceBuilt):  # the early check passes what the full one would
+    with pytest.raises(SpaceBuilt):  # the early check passes what the full one would
         mine("rule", MineSettings(budget=2, scenarios=SCENARIOS, seed=0), out=run_folder, progress=False,
              reports=False)

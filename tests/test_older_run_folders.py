@@ -8,11 +8,11 @@ import json
 
 import pytest
 
-import dv2s_gym.mining.sampling.space as space_module
+from mining_helpers import SpaceBuilt, recorded_run_folder
 from loop_helpers import run_loop
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.loop.settings import LoopError
-from dv2s_gym.mining.miner import SETTINGS_VERSION, _recorded, mine
+from dv2s_gym.mining.miner import SETTINGS_VERSION, mine
 from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.regress.errors import ReportMismatchError, ResumeMismatchError
 from dv2s_gym.regress.report import SCHEMA, SCHEMA_VERSION, load_report
@@ -31,24 +31,12 @@ def _refusal(folder, what: str, file: str, found: str, reads: int) -> str:
             f"dv2s-gym reads format {reads}); start a new --out folder")
 
 
-class _SpaceBuilt(Exception):
-    pass
-
 
 @pytest.fixture
 def mining_folder(tmp_path, monkeypatch):
     """A mining run folder whose settings.json a seed-0 run wrote; building a scene space raises
-    :class:`_SpaceBuilt` (the resume checks are behind it)."""
-    out = tmp_path / "mine"
-    (out / "traces").mkdir(parents=True)
-    recorded = _recorded("rule", MineSettings(budget=2, scenarios=SCENARIOS, seed=0, batch=4), SCENARIOS, {})
-    (out / "settings.json").write_text(json.dumps(recorded), encoding="utf-8")
-
-    def no_space(*args, **kwargs):
-        raise _SpaceBuilt()
-
-    monkeypatch.setattr(space_module, "SceneSpace", no_space)
-    return out
+    :class:`SpaceBuilt` (the resume checks are behind it)."""
+    return recorded_run_folder(tmp_path / "mine", SCENARIOS, monkeypatch)
 
 
 def _mine(out):
@@ -58,7 +46,7 @@ def _mine(out):
 @pytest.mark.parametrize("change, found", [({"version": SETTINGS_VERSION - 1}, f"format {SETTINGS_VERSION - 1}"),
                                            ({"version": None}, "no format"), ({"schema": None}, "no format")])
 def test_a_mining_folder_of_another_format_is_refused_and_one_of_this_format_resumes(mining_folder, change, found):
-    with pytest.raises(_SpaceBuilt):  # past the resume checks
+    with pytest.raises(SpaceBuilt):  # past the resume checks
         _mine(mining_folder)
     path = mining_folder / "settings.json"
     path.write_text(json.dumps({**json.loads(path.read_text(encoding="utf-8")), **change}), encoding="utf-8")
