@@ -5,7 +5,6 @@ conversions and rejections, Markdown tables, the JSON schema, and the HTML page 
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import re
@@ -17,6 +16,7 @@ import numpy as np
 import pytest
 
 from dv2s_gym.mining.html import write_html
+from dv2s_gym.mining.report_record import MineReport
 from dv2s_gym.mining.report import (SCHEMA, SCHEMA_VERSION, MiningReportError, build_report, format_summary,
                                     markdown, write_reports)
 from envs.errors import DV2SError
@@ -327,11 +327,11 @@ def test_a_kept_conversion_without_its_converted_clip_says_why(run_dir, report, 
     recorded when it could not be made, else that none was recorded."""
     page = write_html(report, tmp_path / "report.html", base=run_dir).read_text()
     assert page.count("converted script's clip: none (none was recorded for this conversion)") == 2  # kept, merged
-    damaged = copy.deepcopy(report)
+    damaged = report.to_dict()
     kept = next(c for c in damaged["clusters"] if c.get("status") == "kept")
     kept["reproduction"] = {**(kept.get("reproduction") or {}),
                             "clip": {"file": None, "error": "clip: OSError: [Errno 28] No space left on device"}}
-    page = write_html(damaged, tmp_path / "damaged.html", base=run_dir).read_text()
+    page = write_html(MineReport.from_dict(damaged), tmp_path / "damaged.html", base=run_dir).read_text()
     assert "converted script's clip: none (it could not be made: clip: OSError: [Errno 28] No space left" in page
     assert page.count("converted script's clip: none") == 2
 
@@ -538,7 +538,7 @@ def test_a_loop_round_s_report_names_the_loop_seed_beside_its_own(tmp_path):
     (run / "settings.json").write_text(json.dumps(settings))
     paths = write_reports(run)
     said = "seed 1 (derived by dv2s loop from its seed 0, round 1)"
-    assert said in format_summary(json.loads(paths["json"].read_text()))
+    assert said in format_summary(MineReport.from_dict(json.loads(paths["json"].read_text())))
     assert said in paths["markdown"].read_text()
     page = paths["html"].read_text()
     start = page.index('id="summary"')

@@ -99,6 +99,7 @@ import json
 import os
 import re
 from dv2s_gym.mining.conversion.files import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
+from dv2s_gym.mining.conversion.record import ConversionStatus
 from dv2s_gym.loop.errored import merged_messages, messages_text
 from dv2s_gym.loop.record import (
     ControlTable, ErroredEpisodes, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, Rate, ReferenceGate, RegressSummary,
@@ -1079,7 +1080,7 @@ def _entry_clips(entry: MinedEntry, folder: Path, mine: MiningSummary, policy: O
             except (OSError, ValueError):
                 conversion = {}
             caption = clip_caption(scenario, {**conversion, "policy": conversion.get("policy") or policy},
-                                   merged=conversion.get("status") == "merged")
+                                   merged=conversion.get("status") == ConversionStatus.MERGED)
             found.append((converted, caption + " (mining run)", "run", None))
     return found
 

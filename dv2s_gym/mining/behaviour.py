@@ -73,6 +73,11 @@ class Behaviour:
         """The JSON object of the behaviour, as episode records and reports hold it."""
         return {"actor": self.actor, "actor_manoeuvre": self.actor_manoeuvre, "ego_manoeuvre": self.ego_manoeuvre}
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Behaviour":
+        """The behaviour of its JSON object (:meth:`to_dict`); a part it does not hold is ``"unknown"``."""
+        return cls(**{key: str(data.get(key) or "unknown") for key in ("actor", "actor_manoeuvre", "ego_manoeuvre")})
+
 
 UNKNOWN = Behaviour(actor="unknown", actor_manoeuvre="unknown", ego_manoeuvre="unknown")
 """The behaviour of a failure whose record and trace cannot tell it."""

@@ -1,6 +1,7 @@
 """The mining report as one self-contained HTML page.
 
-:func:`write_html` turns a ``dv2s-mine`` report dict (:mod:`dv2s_gym.mining.report`) into a
+:func:`write_html` turns a ``dv2s-mine`` report (a :class:`~dv2s_gym.mining.report_record.MineReport`,
+:mod:`dv2s_gym.mining.report`) into a
 single file: a summary banner, the settings, plots drawn as inline SVG (failures per 100
 episodes per sampler with their Wilson intervals, distinct clusters found over the run per
 sampler, the failure rate per scenario with its interval), the per-sampler, per-scenario
@@ -22,7 +23,9 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.mining.report_record import MineReport
+from dv2s_gym.mining.behaviour import Behaviour
+from dv2s_gym.mining.conversion.record import ConversionStatus
+from dv2s_gym.mining.report_record import ClusterEntry, FailureEntry, mine_report, MineReport
 from dv2s_gym.mining.report_text import (breadth, by_type_text, clip_caption, parameter_check_text, rate_text,
                                          seed_text)
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
@@ -70,9 +73,9 @@ def _forest(rows: Sequence[Tuple[str, Sequence[Tuple[Mapping[str, Any], str, str
     return svg(height, title, body)
 
 
-def sampler_plot(report: Union[MineReport, Mapping[str, Any]]) -> str:
+def sampler_plot(report: MineReport) -> str:
     """Failures (and avoidable failures) per 100 episodes per sampler, with Wilson 95 % intervals."""
-    report = MineReport.from_dict(report)
+    report = mine_report(report, "sampler_plot")
     samplers = report.samplers
     highs = [finite((getattr(s, key) or {}).get("high")) for s in samplers.values()
              for key in ("failures_per_100", "avoidable_failures_per_100")]
@@ -91,22 +94,22 @@ def sampler_plot(report: Union[MineReport, Mapping[str, Any]]) -> str:
                    [("all failures", COLOURS["failures"], "circle"), ("avoidable", COLOURS["avoidable"], "square")], 0)
 
 
-def scenario_plot(report: Union[MineReport, Mapping[str, Any]]) -> str:
+def scenario_plot(report: MineReport) -> str:
     """The failure rate of each scenario with its Wilson 95 % interval."""
-    report = MineReport.from_dict(report)
+    report = mine_report(report, "scenario_plot")
     rows = []
     for name, s in report.scenarios.items():
-        rate = s.get("failure_rate") or {}
+        rate = s.failure_rate or {}
         rows.append((str(name), [(rate, COLOURS["rate"], "circle",
-                                  f"{name}: {s.get('failures', 0)} failures ({s.get('avoidable', 0)} avoidable) in "
-                                  f"{s.get('episodes', 0)} episodes, rate {fmt_interval(rate)}")]))
+                                  f"{name}: {_or_zero(s.failures)} failures ({_or_zero(s.avoidable)} avoidable) in "
+                                  f"{_or_zero(s.episodes)} episodes, rate {fmt_interval(rate)}")]))
     return _forest(rows, 0.0, 1.0, "Failure rate per scenario (95% interval)",
                    [("failure rate", COLOURS["rate"], "circle")], 2)
 
 
-def discovery_plot(report: Union[MineReport, Mapping[str, Any]]) -> str:
+def discovery_plot(report: MineReport) -> str:
     """Distinct clusters found against episodes run, one step line per sampler."""
-    report = MineReport.from_dict(report)
+    report = mine_report(report, "discovery_plot")
     samplers = report.samplers
     curves = {name: [(int(p[0]), int(p[1])) for p in (s.discovery or [])] for name, s in samplers.items()}
     max_x = max([1] + [p[0] for c in curves.values() for p in c])
@@ -143,6 +146,11 @@ def discovery_plot(report: Union[MineReport, Mapping[str, Any]]) -> str:
                     f'{points[-1][0]} episodes</title><polyline class="line" stroke="{colour}" points="{path}"/></g>')
     body.append(legend(entries))
     return svg(height, title, body)
+
+
+def _or_zero(count: Optional[int]) -> int:
+    """A scenario's count, 0 when the report does not hold it."""
+    return 0 if count is None else count
 
 
 # --------------------------------------------------------------------------- sections
@@ -234,13 +242,13 @@ def _sampler_table(report: MineReport) -> str:
 def _scenario_table(report: MineReport) -> str:
     rows = []
     for name, s in report.scenarios.items():
-        types = by_type_text(s.get("failures_by_type") or {}) if s.get("failures_by_type") else ""
-        rows.append([(_breakable(name), False), (escape(s.get("episodes")), True), (escape(s.get("failures")), True),
-                     (escape(fmt_interval(s.get("failure_rate"))), True),
-                     (escape(_estimate(s.get("estimated_rate"))), True), (escape(s.get("avoidable")), True),
-                     (escape(s.get("unavoidable")), True), (escape(types or "–"), False),
-                     (escape(s.get("clusters")), True), (escape(s.get("converted")), True),
-                     (escape(s.get("kept")), True)])
+        types = by_type_text(s.failures_by_type) if s.failures_by_type else ""
+        rows.append([(_breakable(name), False), (escape(s.episodes), True), (escape(s.failures), True),
+                     (escape(fmt_interval(s.failure_rate)), True),
+                     (escape(_estimate(s.estimated_rate)), True), (escape(s.avoidable), True),
+                     (escape(s.unavoidable), True), (escape(types or "–"), False),
+                     (escape(s.clusters), True), (escape(s.converted), True),
+                     (escape(s.kept), True)])
     return _table(["scenario", "episodes", "failures", "sampled failure rate [95%]",
                    "estimated rate under its own distribution [95%] (ESS)", "avoidable", "unavoidable", "by type",
                    "behaviours", "converted", "kept"], rows)
@@ -266,8 +274,8 @@ def _region(params: Mapping[str, Any]) -> str:
     return "; ".join(parts) or "–"
 
 
-def _reproduction(cluster: Mapping[str, Any]) -> str:
-    reproduction = cluster.get("reproduction")
+def _reproduction(cluster: ClusterEntry) -> str:
+    reproduction = cluster.reproduction
     if not isinstance(reproduction, Mapping) or finite(reproduction.get("rate")) is None:
         return "–"
     text = f"{reproduction['rate']:.2f}"
@@ -281,29 +289,34 @@ def _reproduction(cluster: Mapping[str, Any]) -> str:
     return text
 
 
-def _status(cluster: Mapping[str, Any]) -> str:
-    status = str(cluster.get("status") or "")
+def _status(cluster: ClusterEntry) -> str:
+    status = str(cluster.status or "")
     text = f'<span class="s-{escape(status)}">{escape(status)}</span>'
-    if cluster.get("merged_into"):
-        text += f" into {_breakable(cluster['merged_into'])}"
+    if cluster.merged_into:
+        text += f" into {_breakable(cluster.merged_into)}"
     return text
 
 
-def _cluster_table(clusters: Sequence[Mapping[str, Any]]) -> str:
+def _representative(cluster: ClusterEntry) -> FailureEntry:
+    """The cluster's representative failure (an empty one when the report does not hold it)."""
+    return cluster.representative if cluster.representative is not None else FailureEntry()
+
+
+def _cluster_table(clusters: Sequence[ClusterEntry]) -> str:
     if not clusters:
         return '<p class="muted">None.</p>'
     rows = []
     for c in clusters:
-        rep = c.get("representative") or {}
-        link = f' <a href="#card-{escape(c["id"])}">video</a>' if c.get("conversion") else ""
-        short = str(c.get("id") or "").split("/", 1)[-1]  # the scenario has its own column
-        rows.append([(f'<code class="id" title="{escape(c.get("id"))}">{_breakable(short)}</code>', False),
-                     (_breakable(c.get("scenario")), False),
-                     (escape(c.get("type")), False), (escape(c.get("size")), True), (escape(c.get("avoidable")), True),
-                     ('<span class="region">' + escape(_region(c.get("params") or {})) + "</span>", False),
-                     (f"#{escape(rep.get('index'))} seed {escape(rep.get('seed'))}{link}", False),
-                     (_status(c), False), (_breakable(c.get("bank_entry") or "–"), False),
-                     (escape(_reproduction(c)), True), (escape(fmt(c.get("e2e_sc"), 3)), True)])
+        rep = _representative(c)
+        link = f' <a href="#card-{escape(c.id)}">video</a>' if c.conversion is not None else ""
+        short = str(c.id or "").split("/", 1)[-1]  # the scenario has its own column
+        rows.append([(f'<code class="id" title="{escape(c.id)}">{_breakable(short)}</code>', False),
+                     (_breakable(c.scenario), False),
+                     (escape(c.type), False), (escape(c.size), True), (escape(c.avoidable), True),
+                     ('<span class="region">' + escape(_region(c.params or {})) + "</span>", False),
+                     (f"#{escape(rep.index)} seed {escape(rep.seed)}{link}", False),
+                     (_status(c), False), (_breakable(c.bank_entry or "–"), False),
+                     (escape(_reproduction(c)), True), (escape(fmt(c.e2e_sc, 3)), True)])
     return _table(["cluster (class/actor/ego)", "scenario", "type", "failures", "avoidable", "parameter region",
                    "representative",
                    "conversion", "bank entry", "reproduction", "E2E-SC"], rows)
@@ -345,65 +358,66 @@ def _script(base: Path, script: Any) -> str:
             f"<pre><code>{escape(text)}</code></pre></details>")
 
 
-def _behaviour_text(behaviour: Mapping[str, Any]) -> str:
-    actor = behaviour.get("actor") or "unknown"
-    other = "no other actor" if actor == "none" else f"{actor} {behaviour.get('actor_manoeuvre') or 'unknown'}"
-    return f"{other}; ego {behaviour.get('ego_manoeuvre') or 'unknown'}"
+def _behaviour_text(behaviour: Optional[Behaviour]) -> str:
+    if behaviour is None:
+        return "unknown unknown; ego unknown"
+    actor = behaviour.actor or "unknown"
+    other = "no other actor" if actor == "none" else f"{actor} {behaviour.actor_manoeuvre or 'unknown'}"
+    return f"{other}; ego {behaviour.ego_manoeuvre or 'unknown'}"
 
 
-def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path,
+def _cards(clusters: Sequence[ClusterEntry], videos: _Videos, base: Path,
            report_settings: Optional[Mapping[str, Any]] = None) -> str:
     if not clusters:
         return '<p class="muted">None.</p>'
     out = ['<div class="cards">']
     for c in clusters:
-        rep = c.get("representative") or {}
-        facts = [f"{escape(c.get('type'))} in <code>{escape(c.get('scenario'))}</code>, {escape(c.get('size'))} "
-                 f"failure(s), {escape(c.get('avoidable'))} avoidable",
-                 f"representative: episode #{escape(rep.get('index'))}, seed {escape(rep.get('seed'))}"
-                 + (f", {escape(rep.get('collision_type'))}" if rep.get("collision_type") else "")
-                 + (f" with {escape(rep.get('with'))}" if rep.get("with") else ""),
-                 f"parameters of its failures: {escape(_region(c.get('params') or {}))}",
-                 f"behaviour: {escape(_behaviour_text(c.get('behaviour') or {}))}",
-                 f"conversion: {_status(c)}" + (f", bank entry <code>{escape(c['bank_entry'])}</code>"
-                                                if c.get("bank_entry") else ""),
-                 f"reproduction: {escape(_reproduction(c))}; E2E-SC {escape(fmt(c.get('e2e_sc'), 3))}"]
-        if c.get("replay_entry"):
-            missed = c.get("replay_not_narrowed") or {}
-            facts.append(f"exact replay entry <code>{escape(c['replay_entry'])}</code>: " + (
+        rep = _representative(c)
+        facts = [f"{escape(c.type)} in <code>{escape(c.scenario)}</code>, {escape(c.size)} "
+                 f"failure(s), {escape(c.avoidable)} avoidable",
+                 f"representative: episode #{escape(rep.index)}, seed {escape(rep.seed)}"
+                 + (f", {escape(rep.collision_type)}" if rep.collision_type else "")
+                 + (f" with {escape(rep.with_actor)}" if rep.with_actor else ""),
+                 f"parameters of its failures: {escape(_region(c.params or {}))}",
+                 f"behaviour: {escape(_behaviour_text(c.behaviour))}",
+                 f"conversion: {_status(c)}" + (f", bank entry <code>{escape(c.bank_entry)}</code>"
+                                                if c.bank_entry else ""),
+                 f"reproduction: {escape(_reproduction(c))}; E2E-SC {escape(fmt(c.e2e_sc, 3))}"]
+        if c.replay_entry:
+            missed = c.replay_not_narrowed or {}
+            facts.append(f"exact replay entry <code>{escape(c.replay_entry)}</code>: " + (
                 "every parameter narrowed around the failing values" if not missed else
                 "not narrowed (drawn as in the parent): " + "; ".join(
                     f"<code>{escape(name)}</code> ({escape(why)})" for name, why in sorted(missed.items()))))
-        if c.get("reason"):
-            facts.append(f"reason: {escape(c['reason'])}")
-        if c.get("status") in ("kept", "merged") and not c.get("converted_video"):
+        if c.reason:
+            facts.append(f"reason: {escape(c.reason)}")
+        if c.status in (ConversionStatus.KEPT, ConversionStatus.MERGED) and not c.converted_video:
             facts.append(f"converted script's clip: none ({escape(_missing_clip_reason(c))})")
-        merge_reason = (c.get("conversion") or {}).get("merge_reason")
+        merge_reason = c.conversion.merge_reason if c.conversion is not None else None
         if merge_reason:
             facts.append(f"merged because: {escape(merge_reason)}")
-        description = c.get("description")
-        text = (f"<blockquote>{escape(description)}</blockquote>" if description
+        text = (f"<blockquote>{escape(c.description)}</blockquote>" if c.description
                 else '<p class="muted">No description was generated.</p>')
-        media = videos.tag(c.get("video"))
-        if c.get("converted_video"):  # the failure beside its converted script driven by the same policy
-            caption = clip_caption(str(c.get("bank_entry") or c.get("merged_into") or "-"),
+        media = videos.tag(c.video)
+        if c.converted_video:  # the failure beside its converted script driven by the same policy
+            caption = clip_caption(str(c.bank_entry or c.merged_into or "-"),
                                    {"policy": (report_settings or {}).get("policy"),
-                                    "reproduction": c.get("reproduction") or {}},
-                                   merged=not c.get("bank_entry") and bool(c.get("merged_into")))
-            media = (f'<div class="media"><figure>{media}<figcaption>the failure ({escape(c.get("scenario"))}, seed '
-                     f'{escape(rep.get("seed"))})</figcaption></figure><figure>{videos.tag(c["converted_video"])}'
+                                    "reproduction": c.reproduction or {}},
+                                   merged=not c.bank_entry and bool(c.merged_into))
+            media = (f'<div class="media"><figure>{media}<figcaption>the failure ({escape(c.scenario)}, seed '
+                     f'{escape(rep.seed)})</figcaption></figure><figure>{videos.tag(c.converted_video)}'
                      f'<figcaption>{escape(caption)}</figcaption></figure></div>')
-        out.append(f'<div class="card" id="card-{escape(c.get("id"))}">{media}'
-                   f'<div class="text"><h3><code>{escape(c.get("id"))}</code></h3>'
+        out.append(f'<div class="card" id="card-{escape(c.id)}">{media}'
+                   f'<div class="text"><h3><code>{escape(c.id)}</code></h3>'
                    f'<p>{"<br>".join(facts)}</p><p><b>Generated description</b></p>{text}'
-                   f'{_script(base, c.get("script"))}</div></div>')
+                   f'{_script(base, c.script)}</div></div>')
     return "".join(out) + "</div>"
 
 
-def _missing_clip_reason(cluster: Mapping[str, Any]) -> str:
+def _missing_clip_reason(cluster: ClusterEntry) -> str:
     """Why a kept or merged conversion shows no clip of its converted script: the error recorded when it could not
     be made, else that none was recorded (a run from before clips were made, or no reproduction episode)."""
-    reproduction = cluster.get("reproduction")
+    reproduction = cluster.reproduction
     clip = reproduction.get("clip") if isinstance(reproduction, Mapping) else None
     if isinstance(clip, Mapping) and clip.get("error"):
         return f"it could not be made: {clip['error']}"
@@ -414,26 +428,26 @@ def _rejected(report: MineReport) -> str:
     rejected = report.rejected
     if not rejected:
         return '<p class="muted">None.</p>'
-    by_stage = report.counts.get("rejected_by_stage") or {}
+    by_stage = report.counts.rejected_by_stage or {}
     summary = "<p>By stage: " + ", ".join(f"{escape(s)} {escape(n)}" for s, n in by_stage.items()) + ".</p>"
-    rows = [[(f"<code>{_breakable(r.get('cluster'))}</code>", False), (escape(r.get("index")), True),
-             (escape(r.get("stage")), False), (escape(r.get("reason")), False)] for r in rejected]
+    rows = [[(f"<code>{_breakable(r.cluster)}</code>", False), (escape(r.index), True),
+             (escape(r.stage), False), (escape(r.reason), False)] for r in rejected]
     return summary + _table(["cluster", "episode", "stage", "reason"], rows)
 
 
-def _failure_rows(failures: Sequence[Mapping[str, Any]], limit: int = 200) -> str:
+def _failure_rows(failures: Sequence[FailureEntry], limit: int = 200) -> str:
     if not failures:
         return '<p class="muted">None.</p>'
     rows = []
     for f in failures[:limit]:
-        reference = f.get("reference") or {}
+        reference = f.reference or {}
         ref_failure = reference.get("failure") if isinstance(reference, Mapping) else None
         ref_text = (f"{reference.get('policy', '?')}: "
                     + (str(ref_failure.get("type")) if isinstance(ref_failure, Mapping) else "no failure")
                     if reference else "–")
-        rows.append([(escape(f.get("index")), True), (_breakable(f.get("scenario")), False),
-                     (escape(f.get("seed")), True), (escape(f.get("type")), False), (escape(ref_text), False),
-                     (f"<code>{_breakable(f.get('cluster'))}</code>", False), (_breakable(f.get("trace") or "–"), False)])
+        rows.append([(escape(f.index), True), (_breakable(f.scenario), False),
+                     (escape(f.seed), True), (escape(f.type), False), (escape(ref_text), False),
+                     (f"<code>{_breakable(f.cluster)}</code>", False), (_breakable(f.trace or "–"), False)])
     more = (f'<p class="muted">{len(failures) - limit} more in report.json.</p>' if len(failures) > limit else "")
     return _table(["episode", "scenario", "seed", "failure", "reference driver", "cluster", "trace"], rows) + more
 
@@ -442,19 +456,19 @@ def _errors(report: MineReport) -> str:
     errors = report.errors
     if not errors and not report.worker_restarts:
         return '<p class="muted">None.</p>'
-    items = [f"<li><b>#{escape(e.get('index'))} {escape(e.get('scenario'))} seed {escape(e.get('seed'))}</b>: "
-             f"{escape(e.get('error'))}</li>" for e in errors[:100]]
-    items += [f"<li><b>#{escape(r.get('index'))} {escape(r.get('scenario'))} seed {escape(r.get('seed'))}</b>: "
-              f"{escape('; then '.join(r.get('problems') or []))}; finished by a new worker</li>"
+    items = [f"<li><b>#{escape(e.index)} {escape(e.scenario)} seed {escape(e.seed)}</b>: "
+             f"{escape(e.error)}</li>" for e in errors[:100]]
+    items += [f"<li><b>#{escape(r.index)} {escape(r.scenario)} seed {escape(r.seed)}</b>: "
+              f"{escape('; then '.join(r.problems or []))}; finished by a new worker</li>"
               for r in report.worker_restarts[:100]]
     return "<ul>" + "".join(items) + "</ul>"
 
 
-def render_html(report: Union[MineReport, Mapping[str, Any]], *, base: Union[str, os.PathLike] = ".",
+def render_html(report: MineReport, *, base: Union[str, os.PathLike] = ".",
                 page_dir: Optional[Union[str, os.PathLike]] = None, embed_videos: bool = True,
                 max_videos: int = MAX_VIDEOS) -> str:
     """The page as a string; relative video and script paths resolve against ``base`` (the run folder)."""
-    report = MineReport.from_dict(report)
+    report = mine_report(report, "render_html")
     base = Path(base)
     videos = _Videos(base, Path(page_dir) if page_dir is not None else base, embed_videos, max_videos)
     title = f"dv2s mine: {report.settings.get('policy', '?')}"
@@ -465,9 +479,9 @@ def render_html(report: Union[MineReport, Mapping[str, Any]], *, base: Union[str
     figures = "".join(f"<figure>{plot}<figcaption>{escape(caption)}</figcaption></figure>" for caption, plot in plots)
     clusters = list(report.clusters)
     unavoidable = list(report.unavoidable_clusters)
-    order = {"kept": 0, "merged": 1, "rejected": 2}
-    converted = sorted((c for c in clusters if c.get("conversion")), key=lambda c: order.get(c.get("status"), 3))
-    unavoidable_converted = [c for c in unavoidable if c.get("conversion")]
+    order = {status: rank for rank, status in enumerate(ConversionStatus)}  # kept, merged, rejected
+    converted = sorted((c for c in clusters if c.conversion is not None), key=lambda c: order.get(c.status, 3))
+    unavoidable_converted = [c for c in unavoidable if c.conversion is not None]
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -500,20 +514,20 @@ def render_html(report: Union[MineReport, Mapping[str, Any]], *, base: Union[str
     return "\n".join(parts)
 
 
-def write_html(report: Union[MineReport, Mapping[str, Any]], path: Union[str, os.PathLike], *,
+def write_html(report: MineReport, path: Union[str, os.PathLike], *,
                base: Optional[Union[str, os.PathLike]] = None, embed_videos: bool = True,
                max_videos: int = MAX_VIDEOS) -> Path:
     """Write the page to ``path`` (atomically) and return ``path``.
 
     Args:
-        report: a ``dv2s-mine`` report dict.
+        report: a ``dv2s-mine`` report (:class:`~dv2s_gym.mining.report_record.MineReport`).
         path: the ``.html`` file.
         base: the run folder the report's relative paths (videos, scripts) start from
             (default: the report's ``run_dir``, else the page's folder).
         embed_videos: embed up to ``max_videos`` failure videos as data URIs; the others are
             linked relative to the page.
     """
-    report = MineReport.from_dict(report)
+    report = mine_report(report, "write_html")
     path = Path(path)
     base = Path(base) if base is not None else Path(report.run_dir or path.parent)
     page = render_html(report, base=base, page_dir=path.parent, embed_videos=embed_videos, max_videos=max_videos)

@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping
 
-from scenario_bank.records import EpisodeRecord
+from scenario_bank.records import JsonRecord
 
 __all__ = ["JsonlAppender", "read_rows"]
 
@@ -27,8 +27,9 @@ class JsonlAppender:
         self._handle = open(path, "ab")
 
     def append(self, record: Mapping[str, Any]) -> None:
-        """Write ``record`` (a JSON object, or an :class:`~scenario_bank.records.EpisodeRecord`) as one line."""
-        record = record.to_dict() if isinstance(record, EpisodeRecord) else record
+        """Write ``record`` (a JSON object, or a typed record: :class:`~scenario_bank.records.JsonRecord`) as one
+        line."""
+        record = record.to_dict() if isinstance(record, JsonRecord) else record
         try:
             self._handle.write(json.dumps(record, sort_keys=True, default=str).encode("utf-8") + b"\n")
             self._handle.flush()

@@ -56,10 +56,11 @@ from dv2s_gym.mining.conversion.episodes import reference_passed
 from dv2s_gym.mining.conversion.files import cluster_slug, CONVERSION_DIR
 from dv2s_gym.mining.conversion.rejection import SETUP_ERRORS
 from dv2s_gym.mining.conversion.convert import convert_failure
+from dv2s_gym.mining.conversion.record import ConversionRecord, ConversionStatus, read_conversions
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
-from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
+from dv2s_gym.mining.jsonl import JsonlAppender
 from dv2s_gym.mining.monitors import kind_label, types_without_detector
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
@@ -111,7 +112,7 @@ class MineRun:
     settings: MineSettings
     records: List[EpisodeRecord]
     clusters: Dict[int, str]
-    conversions: List[Dict[str, Any]] = field(default_factory=list)
+    conversions: List[ConversionRecord] = field(default_factory=list)
     reports: Dict[str, Path] = field(default_factory=dict)
     seconds: float = 0.0
 
@@ -157,7 +158,7 @@ class MineRun:
         kinds = Counter(r.failure["kind"] for r in failures)
         kinds_by_type = Counter(r.failure["type"] for r in failures)
         avoidable_clusters = {self.clusters[int(r.index)] for r in self.avoidable}
-        status = Counter(c.get("status") for c in self.conversions)
+        status = Counter(c.status for c in self.conversions)
         lines = [
             f"{len(self.records)} episodes of {self.policy} ({self.settings.sampler} sampler), "
             f"{errors} error{'s' if errors != 1 else ''}{self._errored_scenarios()}, "
@@ -175,8 +176,8 @@ class MineRun:
             f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
         ]
         if self.conversions:
-            lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
-                         f"{status.get('merged', 0)}, rejected {status.get('rejected', 0)}")
+            lines.append(f"converted {len(self.conversions)}: kept {status[ConversionStatus.KEPT]}, merged "
+                         f"{status[ConversionStatus.MERGED]}, rejected {status[ConversionStatus.REJECTED]}")
         if errors:
             first = str(self.errors[0].error).strip().splitlines()
             lines.append(error_warning(errors, len(self.records), first[-1] if first else ""))
@@ -609,7 +610,7 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
             run.conversions = convert_clusters(run, settings.conversion, bank_dir=bank_dir, progress=progress,
                                                max_conversions=settings.max_conversions)
         else:
-            run.conversions = read_rows(out / "conversions.jsonl")
+            run.conversions = _conversions(out / "conversions.jsonl")
         run.seconds = time.perf_counter() - started
         if reports:
             run.reports = _write_reports(out)
@@ -718,7 +719,7 @@ def _has_entries(folder: Path) -> bool:
 
 
 def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: Optional[str],
-                     progress: bool = True, max_conversions: Optional[int] = None) -> List[Dict[str, Any]]:
+                     progress: bool = True, max_conversions: Optional[int] = None) -> List[ConversionRecord]:
     """Convert one representative failure per avoidable cluster not converted yet, with ``conversion`` (its policy
     and ``env_config`` replaced by the run's); the conversion records.
 
@@ -732,9 +733,9 @@ def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: 
         raise MiningError("converting failures adds scenarios to a bank: pass a writable bank folder "
                           "(--bank DIR); the shipped bank is read-only")
     path = run.out / "conversions.jsonl"
-    existing = read_rows(path)
-    converted = {row["cluster"] for row in existing}
-    converted_episodes = {row.get("index") for row in existing}  # a run converted under older cluster ids
+    existing = _conversions(path)
+    converted = {row.cluster for row in existing}
+    converted_episodes = {row.index for row in existing}  # a run converted under older cluster ids
     candidates = []
     for cluster, members in sorted(group(run.records).items()):
         avoidable = [r for r in members if r.avoidable is not False]
@@ -762,7 +763,7 @@ def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: 
                     raise MiningError(f"converting stopped at cluster {cluster} ({len(existing)} converted, the rest "
                                       f"not tried): {first} Rerun the same command when it works; finished "
                                       "episodes and conversions are kept") from None
-            row["cluster"] = cluster
+            row = ConversionRecord.from_dict(row).replace(cluster=cluster)
             appender.append(row)
             existing.append(row)
             if bar is not None:
@@ -783,7 +784,7 @@ def _entry_video(entry, provenance: Mapping[str, Any]) -> Optional[str]:
     return video
 
 
-def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
+def _reached_bank(bank, out: Path, cluster: str) -> Optional[ConversionRecord]:
     """The conversion row of ``cluster`` when this run already added it to the bank (or merged it into an entry)
     but was killed before writing its ``conversions.jsonl`` line; rebuilt from the entry's provenance, so a
     resumed run neither converts the cluster again nor reports it merged into the entry it made itself."""
@@ -792,23 +793,33 @@ def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
         source = entry.source
         if source.is_replay:
             continue  # the exact replay of a failure is written before its converted script is judged
-        found = [("kept", source)] + [("merged", merged) for merged in source.merged or ()]
+        found = [(ConversionStatus.KEPT, source.to_dict())] + [(ConversionStatus.MERGED, merged)
+                                                               for merged in source.merged or ()]
         for status, provenance in found:
             if provenance.get("run") != run or provenance.get("cluster") != cluster:
                 continue
 
             folder = Path(out) / "failures" / cluster_slug(cluster, provenance.get("index"))
             video, script = folder / "failure.webm", folder / CONVERSION_DIR / "scenario.scenic"
-            return {"cluster": cluster, "index": provenance.get("index"), "status": status, "reason": None,
-                    "stage": None, "video": str(video.relative_to(out)) if video.is_file() else _entry_video(entry, provenance),
-                    "description": provenance.get("description") if status == "merged" else entry.description,
-                    "script": str(script.relative_to(out)) if script.is_file() else None,
-                    "reproduction": provenance.get("reproduction"), "e2e_sc": provenance.get("e2e_sc"),
-                    "bank_entry": entry.name if status == "kept" else None,
-                    "merged_into": entry.name if status == "merged" else None,
-                    **({"merge_reason": provenance.get("how")} if status == "merged" else {}),
-                    "seconds": None, "timings": {}, "recovered_from_bank": True}
+            merged = status == ConversionStatus.MERGED
+            return ConversionRecord.from_dict({
+                "cluster": cluster, "index": provenance.get("index"), "status": status.value, "reason": None,
+                "stage": None, "video": str(video.relative_to(out)) if video.is_file() else _entry_video(entry, provenance),
+                "description": provenance.get("description") if merged else entry.description,
+                "script": str(script.relative_to(out)) if script.is_file() else None,
+                "reproduction": provenance.get("reproduction"), "e2e_sc": provenance.get("e2e_sc"),
+                "bank_entry": None if merged else entry.name, "merged_into": entry.name if merged else None,
+                **({"merge_reason": provenance.get("how")} if merged else {}),
+                "seconds": None, "timings": {}, "recovered_from_bank": True})
     return None
+
+
+def _conversions(path: Path) -> List[ConversionRecord]:
+    """The conversion records of the run's ``conversions.jsonl``; a damaged line is a :class:`MiningError`."""
+    try:
+        return read_conversions(path)
+    except RecordError as error:
+        raise MiningError(str(error)) from None
 
 
 def _write_reports(out: Path) -> Dict[str, Path]:

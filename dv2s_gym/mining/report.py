@@ -93,17 +93,16 @@ import math
 import os
 import statistics
 from collections import Counter
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.mining.behaviour import Behaviour, behaviour_of
 from dv2s_gym.mining.cluster import cluster_failures
+from dv2s_gym.mining.conversion.record import ConversionRecord, ConversionStatus
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.family import record_family
 from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.sampling.rate import FailureRate, rate_estimates
-from dv2s_gym.mining.report_record import MineReport
+from dv2s_gym.mining.report_record import (ClusterEntry, EpisodeError, FailureEntry, mine_report, MineReport,
+                                           RejectedConversion, ScenarioSummary, WorkerRestart)
 from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, by_type_text, error_warning,
                                          not_compared_counts, parameter_check_text, rate_text, seed_text)
 from dv2s_gym.mining.report_text import number_text as _num
@@ -116,8 +115,7 @@ from scenario_bank.failure_types import FAILURE_TYPES, severity_order
 from scenario_bank.records import EpisodeRecord, RecordError
 
 __all__ = [
-    "SCHEMA", "SCHEMA_VERSION", "FAILURE_ORDER", "MiningReportError", "FailureEntry", "ClusterEntry", "read_jsonl",
-    "read_run",
+    "SCHEMA", "SCHEMA_VERSION", "FAILURE_ORDER", "MiningReportError", "read_jsonl", "read_run",
     "build_report", "build_report_from_records", "format_summary", "markdown", "write_reports", "breadth", "rate_text",
 ]
 
@@ -127,7 +125,7 @@ CONFIDENCE = 0.95
 FAILURE_ORDER = FAILURE_TYPES
 """Failure types in the order the report lists them (other types follow, sorted):
 :data:`scenario_bank.failure_types.FAILURE_TYPES`."""
-STATUS_ORDER = ("kept", "merged", "rejected")
+STATUS_ORDER = (ConversionStatus.KEPT, ConversionStatus.MERGED, ConversionStatus.REJECTED)
 NOT_CONVERTED = "not converted"
 
 PathLike = Union[str, os.PathLike]
@@ -172,9 +170,10 @@ def read_jsonl(path: PathLike) -> Tuple[List[Dict[str, Any]], int]:
     return records, skipped
 
 
-def read_run(run_dir: PathLike) -> Tuple[RunSettings, List[EpisodeRecord], List[Dict[str, Any]], Dict[str, int]]:
+def read_run(run_dir: PathLike) -> Tuple[RunSettings, List[EpisodeRecord], List[ConversionRecord], Dict[str, int]]:
     """``(settings, episodes, conversions, skipped_lines)`` of a run folder (``settings``: its ``settings.json``,
-    :func:`~dv2s_gym.mining.settings.read_run_settings`; ``episodes``: its episode records).
+    :func:`~dv2s_gym.mining.settings.read_run_settings`; ``episodes``: its episode records; ``conversions``: its
+    conversion records).
 
     Episodes are sorted by index, one per index (the first record of an index wins);
     conversions keep the last record of each cluster id.
@@ -201,9 +200,14 @@ def read_run(run_dir: PathLike) -> Tuple[RunSettings, List[EpisodeRecord], List[
             except RecordError as error:
                 raise MiningReportError(f"{run_dir / 'episodes.jsonl'}: record {number}: {error}; remove it and "
                                         "rebuild the report") from None
-    latest: Dict[str, Dict[str, Any]] = {}
-    for record in conversions:
-        latest[str(record.get("cluster"))] = record
+    latest: Dict[str, ConversionRecord] = {}
+    for number, row in enumerate(conversions, 1):
+        try:
+            record = ConversionRecord.from_dict(row)
+        except RecordError as error:
+            raise MiningReportError(f"{run_dir / 'conversions.jsonl'}: record {number}: {error}; remove it and "
+                                    "rebuild the report") from None
+        latest[str(record.cluster)] = record
     skipped = {name: n for name, n in (("episodes.jsonl", skipped_episodes),
                                        ("conversions.jsonl", skipped_conversions)) if n}
     ordered = [by_index[i] for i in sorted(by_index)]
@@ -269,135 +273,12 @@ def _param_region(members: Sequence["FailureEntry"]) -> Dict[str, Any]:
     return region
 
 
-@dataclass(frozen=True)
-class FailureEntry:
-    """One failed episode as the report lists it (``Failure`` in the module docstring); :meth:`to_dict` is its JSON.
-
-    The episode's ``index``, the ``sampler`` that drew it, its ``scenario``, scenario ``family``
-    (:func:`~dv2s_gym.mining.family.record_family`), env ``seed`` and sampled ``params``; the failure's ``type``, its
-    ``kind`` (the type refined by the collision type), ``time``, the actor it was with (``with_actor``, JSON
-    ``with``) and that actor's kind (``with_kind``), the ``collision_type`` and the failure's ``min_ttc``; the
-    episode's robustness ``rho``, whether the reference driver avoided it (``avoidable``; ``None``: unknown) and the
-    reference driver's outcome (``reference``), the ``cluster`` id, the failure's ``behaviour`` and the saved
-    ``trace`` (relative to the run folder).
-    """
-
-    index: int
-    sampler: str
-    scenario: str
-    family: str
-    seed: int
-    params: Mapping[str, Any]
-    type: str
-    kind: str
-    time: Optional[float]
-    with_actor: Optional[str]
-    with_kind: Optional[str]
-    collision_type: Optional[str]
-    min_ttc: Optional[float]
-    rho: Optional[float]
-    avoidable: Optional[bool]
-    reference: Optional[Mapping[str, Any]]
-    cluster: Optional[str]
-    behaviour: Behaviour
-    trace: Optional[str]
-
-    @classmethod
-    def of(cls, record: EpisodeRecord, cluster: Optional[str], default_sampler: str) -> "FailureEntry":
-        """The entry of the failed episode ``record`` in ``cluster`` (``default_sampler``: the run's sampler, for a
-        record that does not name its own)."""
-        failure = record.failure or {}
-        return cls(index=int(record.index), sampler=str(record.sampler or default_sampler), scenario=record.scenario,
-                   family=record_family(record), seed=record.seed, params=dict(record.params or {}),
-                   type=str(failure.get("type")), kind=str(failure.get("kind") or failure.get("type")),
-                   time=failure.get("time"), with_actor=failure.get("with"), with_kind=failure.get("with_kind"),
-                   collision_type=failure.get("collision_type"), min_ttc=failure.get("min_ttc"), rho=record.rho,
-                   avoidable=record.avoidable, reference=record.reference, cluster=cluster,
-                   behaviour=behaviour_of(record), trace=record.trace)
-
-    def to_dict(self) -> Dict[str, Any]:
-        """The entry's JSON object, as ``report.json`` holds it."""
-        return {"index": self.index, "sampler": self.sampler, "scenario": self.scenario, "family": self.family,
-                "seed": self.seed, "params": dict(self.params), "type": self.type, "kind": self.kind,
-                "time": self.time, "with": self.with_actor, "with_kind": self.with_kind,
-                "collision_type": self.collision_type, "min_ttc": self.min_ttc, "rho": self.rho,
-                "avoidable": self.avoidable, "reference": self.reference, "cluster": self.cluster,
-                "behaviour": self.behaviour.to_dict(), "trace": self.trace}
-
-
-@dataclass(frozen=True)
-class ClusterEntry:
-    """One behaviour cluster as the report lists it (``Cluster`` in the module docstring); :meth:`to_dict` is its
-    JSON.
-
-    Its ``id`` and, from it, ``kind`` (the failure class) and ``region`` (the id after family and class); its
-    ``representative`` failure (:class:`FailureEntry`) and that one's ``scenario``, ``family``, ``type`` and
-    ``behaviour``; every scenario its failures ran in (``scenarios``); the members' counts (``size``, ``avoidable``,
-    ``unavoidable``, ``unknown``, per sampler in ``samplers``), the first member's index (``first_index``), the
-    parameter region they cover (``params``), their ``collision_types`` and the kinds of actor they were with
-    (``with_kinds``); and from the cluster's conversion record (``conversion``, ``None`` when it was not converted):
-    the failure ``video`` and the ``converted_video``, the ``status`` and its ``reason``, the ``bank_entry``, the
-    entry it was ``merged_into``, the exact ``replay_entry`` and the parameters it could not narrow
-    (``replay_not_narrowed``), the ``reproduction`` record and its ``reproduction_rate``, the ``e2e_sc``, the
-    ``description`` and the ``script``.
-    """
-
-    id: str
-    scenario: str
-    family: str
-    scenarios: Tuple[str, ...]
-    type: str
-    kind: str
-    region: str
-    behaviour: Behaviour
-    size: int
-    avoidable: int
-    unavoidable: int
-    unknown: int
-    samplers: Mapping[str, int]
-    first_index: int
-    params: Mapping[str, Any]
-    collision_types: Mapping[str, int]
-    with_kinds: Mapping[str, int]
-    representative: FailureEntry
-    video: Optional[str]
-    converted_video: Optional[str]
-    status: str
-    reason: Optional[str]
-    bank_entry: Optional[str]
-    merged_into: Optional[str]
-    replay_entry: Optional[str]
-    replay_not_narrowed: Mapping[str, Any]
-    reproduction: Optional[Any]
-    reproduction_rate: Optional[float]
-    e2e_sc: Optional[float]
-    description: Optional[str]
-    script: Optional[str]
-    conversion: Optional[Mapping[str, Any]]
-
-    def to_dict(self) -> Dict[str, Any]:
-        """The cluster's JSON object, as ``report.json`` holds it."""
-        return {
-            "id": self.id, "scenario": self.scenario, "family": self.family, "scenarios": list(self.scenarios),
-            "type": self.type, "kind": self.kind, "region": self.region, "behaviour": self.behaviour.to_dict(),
-            "size": self.size, "avoidable": self.avoidable, "unavoidable": self.unavoidable, "unknown": self.unknown,
-            "samplers": dict(self.samplers), "first_index": self.first_index, "params": dict(self.params),
-            "collision_types": dict(self.collision_types), "with_kinds": dict(self.with_kinds),
-            "representative": self.representative.to_dict(), "video": self.video,
-            "converted_video": self.converted_video, "status": self.status, "reason": self.reason,
-            "bank_entry": self.bank_entry, "merged_into": self.merged_into, "replay_entry": self.replay_entry,
-            "replay_not_narrowed": dict(self.replay_not_narrowed), "reproduction": self.reproduction,
-            "reproduction_rate": self.reproduction_rate, "e2e_sc": self.e2e_sc, "description": self.description,
-            "script": self.script, "conversion": dict(self.conversion) if self.conversion is not None else None,
-        }
-
-
-def _representative(members: Sequence[FailureEntry], conversion: Optional[Mapping[str, Any]]) -> FailureEntry:
+def _representative(members: Sequence[FailureEntry], conversion: Optional[ConversionRecord]) -> FailureEntry:
     """The converted episode, else the one the miner would convert: among failures not known to be
     unavoidable (all, when every one is), the most violated (lowest rho), then the first."""
     if conversion is not None:
         for member in members:
-            if member.index == conversion.get("index"):
+            if member.index == conversion.index:
                 return member
     pool = [m for m in members if m.avoidable is not False] or list(members)
 
@@ -430,17 +311,17 @@ def build_report(run_dir: PathLike, *, created: Optional[str] = None) -> MineRep
     return report.replace(run_dir=str(run_dir), skipped_lines=dict(skipped))
 
 
-def _episode_errors(episodes: Sequence[EpisodeRecord], default_sampler: str) -> List[Dict[str, Any]]:
+def _episode_errors(episodes: Sequence[EpisodeRecord], default_sampler: str) -> List[EpisodeError]:
     """The episodes that errored: index, sampler, scenario, seed and the error."""
-    return [{"index": int(r.index), "sampler": str(r.sampler or default_sampler),
-             "scenario": r.scenario, "seed": r.seed, "error": str(r.error)}
+    return [EpisodeError(index=int(r.index), sampler=str(r.sampler or default_sampler), scenario=r.scenario,
+                         seed=r.seed, error=str(r.error))
             for r in episodes if r.error]
 
 
-def _worker_restarts(episodes: Sequence[EpisodeRecord]) -> List[Dict[str, Any]]:
+def _worker_restarts(episodes: Sequence[EpisodeRecord]) -> List[WorkerRestart]:
     """The episodes a new worker finished (their worker crashed or hung), with what happened to it."""
-    return [{"index": int(r.index), "scenario": r.scenario, "seed": r.seed,
-             "problems": [str(p) for p in r.worker_restarts]} for r in episodes if r.worker_restarts]
+    return [WorkerRestart(index=int(r.index), scenario=r.scenario, seed=r.seed,
+                          problems=tuple(str(p) for p in r.worker_restarts)) for r in episodes if r.worker_restarts]
 
 
 def _failures(ok: Sequence[EpisodeRecord], clusters: Mapping[int, str], default_sampler: str) -> List[FailureEntry]:
@@ -456,31 +337,31 @@ def _failures(ok: Sequence[EpisodeRecord], clusters: Mapping[int, str], default_
     return [FailureEntry.of(r, clusters[int(r.index)], default_sampler) for r in failed]
 
 
-def _conversions_by_cluster(conversions: Sequence[Mapping[str, Any]],
-                            clusters: Mapping[int, str]) -> Dict[str, List[Mapping[str, Any]]]:
+def _conversions_by_cluster(conversions: Sequence[ConversionRecord],
+                            clusters: Mapping[int, str]) -> Dict[str, List[ConversionRecord]]:
     """The conversions, attached to the cluster of their representative episode."""
-    by_cluster: Dict[str, List[Mapping[str, Any]]] = {}
+    by_cluster: Dict[str, List[ConversionRecord]] = {}
     for conversion in conversions:
-        index = conversion.get("index")
+        index = conversion.index
         cluster = clusters.get(int(index)) if isinstance(index, int) else None
-        cluster = cluster or str(conversion.get("cluster"))
+        cluster = cluster or str(conversion.cluster)
         by_cluster.setdefault(cluster, []).append(conversion)
     return by_cluster
 
 
-def _primary_conversion(found: Sequence[Mapping[str, Any]]) -> Optional[Mapping[str, Any]]:
+def _primary_conversion(found: Sequence[ConversionRecord]) -> Optional[ConversionRecord]:
     """The conversion of a cluster that counts: kept before merged before rejected, else the first."""
     status_rank = {s: i for i, s in enumerate(STATUS_ORDER)}
-    return min(found, key=lambda c: status_rank.get(c.get("status"), len(STATUS_ORDER))) if found else None
+    return min(found, key=lambda c: status_rank.get(c.status, len(STATUS_ORDER))) if found else None
 
 
 def _cluster_entry(cluster_id: str, members: Sequence[FailureEntry],
-                   conversion: Optional[Mapping[str, Any]]) -> ClusterEntry:
+                   conversion: Optional[ConversionRecord]) -> ClusterEntry:
     """A cluster's entry: its representative, its members' counts and parameter region, and its conversion."""
     representative = _representative(members, conversion)
     parts = cluster_id.split("/", 2)
-    found = conversion or {}
-    reproduction = found.get("reproduction")
+    found = conversion if conversion is not None else ConversionRecord()
+    reproduction = found.reproduction
     return ClusterEntry(
         id=cluster_id, scenario=representative.scenario, family=representative.family,
         scenarios=tuple(sorted({str(m.scenario) for m in members})), type=representative.type,
@@ -492,16 +373,15 @@ def _cluster_entry(cluster_id: str, members: Sequence[FailureEntry],
         first_index=min(m.index for m in members), params=_param_region(members),
         collision_types=dict(sorted(Counter(str(m.collision_type) for m in members if m.collision_type).items())),
         with_kinds=dict(sorted(Counter(str(m.with_kind) for m in members if m.with_kind).items())),
-        representative=representative, video=found.get("video"), converted_video=found.get("converted_video"),
-        status=found.get("status") or NOT_CONVERTED, reason=found.get("reason"), bank_entry=found.get("bank_entry"),
-        merged_into=found.get("merged_into"), replay_entry=found.get("replay_entry"),
-        replay_not_narrowed=dict(found.get("replay_not_narrowed") or {}), reproduction=reproduction,
+        representative=representative, video=found.video, converted_video=found.converted_video,
+        status=found.status.value if found.status else NOT_CONVERTED, reason=found.reason,
+        bank_entry=found.bank_entry, merged_into=found.merged_into, replay_entry=found.replay_entry,
+        replay_not_narrowed=dict(found.replay_not_narrowed or {}), reproduction=reproduction,
         reproduction_rate=(reproduction or {}).get("rate") if isinstance(reproduction, Mapping) else None,
-        e2e_sc=found.get("e2e_sc"), description=found.get("description"), script=found.get("script"),
-        conversion=dict(conversion) if conversion is not None else None)
+        e2e_sc=found.e2e_sc, description=found.description, script=found.script, conversion=conversion)
 
 
-def _cluster_entries(failures: Sequence[FailureEntry], conversions: Sequence[Mapping[str, Any]],
+def _cluster_entries(failures: Sequence[FailureEntry], conversions: Sequence[ConversionRecord],
                      clusters: Mapping[int, str]) -> List[ClusterEntry]:
     """Every cluster's entry, the most avoidable failures first, then the largest, then the first found."""
     by_cluster_conversions = _conversions_by_cluster(conversions, clusters)
@@ -514,17 +394,17 @@ def _cluster_entries(failures: Sequence[FailureEntry], conversions: Sequence[Map
     return entries
 
 
-def _rejected_conversions(conversions: Sequence[Mapping[str, Any]]) -> List[Dict[str, Any]]:
+def _rejected_conversions(conversions: Sequence[ConversionRecord]) -> List[RejectedConversion]:
     """The rejected conversions: every check the judge failed is a reason of its own (``rejections``; the first
     is ``reason``)."""
-    return [{"cluster": c.get("cluster"), "index": c.get("index"), "stage": c.get("stage") or _stage(c.get("reason")),
-             "reason": "; ".join(c.get("rejections") or []) or c.get("reason"),
-             "rejections": list(c.get("rejections") or ([c["reason"]] if c.get("reason") else []))}
-            for c in conversions if c.get("status") == "rejected"]
+    return [RejectedConversion(cluster=c.cluster, index=c.index, stage=c.stage or _stage(c.reason),
+                               reason="; ".join(c.rejections or []) or c.reason,
+                               rejections=tuple(c.rejections or ([c.reason] if c.reason else [])))
+            for c in conversions if c.status == ConversionStatus.REJECTED]
 
 
-def _failure_counts(ok: Sequence[EpisodeRecord], errors: Sequence[Mapping[str, Any]],
-                    restarts: Sequence[Mapping[str, Any]], failures: Sequence[FailureEntry],
+def _failure_counts(ok: Sequence[EpisodeRecord], errors: Sequence[EpisodeError],
+                    restarts: Sequence[WorkerRestart], failures: Sequence[FailureEntry],
                     cluster_entries: Sequence[ClusterEntry]) -> Dict[str, Any]:
     """The counts of episodes, failures and clusters."""
     return {
@@ -545,34 +425,34 @@ def _failure_counts(ok: Sequence[EpisodeRecord], errors: Sequence[Mapping[str, A
     }
 
 
-def _conversion_counts(conversions: Sequence[Mapping[str, Any]],
-                       rejected: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+def _conversion_counts(conversions: Sequence[ConversionRecord],
+                       rejected: Sequence[RejectedConversion]) -> Dict[str, Any]:
     """The counts of conversions by status and stage, their times, and the judge's parameter check."""
-    statuses = Counter(str(c.get("status")) for c in conversions)
-    seconds = [float(c["seconds"]) for c in conversions
-               if isinstance(c.get("seconds"), (int, float)) and math.isfinite(float(c["seconds"]))]
+    statuses = Counter(c.status for c in conversions)
+    seconds = [float(c.seconds) for c in conversions
+               if isinstance(c.seconds, (int, float)) and math.isfinite(float(c.seconds))]
     stage_seconds: Dict[str, List[float]] = {}
     for conversion in conversions:
-        for stage, value in (conversion.get("timings") or {}).items():
+        for stage, value in (conversion.timings or {}).items():
             if isinstance(value, (int, float)) and math.isfinite(float(value)):
                 stage_seconds.setdefault(str(stage), []).append(float(value))
     not_compared: Dict[str, int] = {}
     for c in conversions:
-        parameters = c.get("parameters") or {}
+        parameters = c.parameters or {}
         for key, n in not_compared_counts(parameters.get("not_comparable")).items():
             not_compared[key] = not_compared.get(key, 0) + n
     not_compared = {key: not_compared[key] for key, _, _ in NOT_COMPARED_REASONS if key in not_compared}
     return {
         "converted": len(conversions),
-        "kept": statuses["kept"],
-        "merged": statuses["merged"],
-        "rejected": statuses["rejected"],
-        "rejected_by_stage": dict(sorted(Counter(r["stage"] for r in rejected).items())),
+        "kept": statuses[ConversionStatus.KEPT],
+        "merged": statuses[ConversionStatus.MERGED],
+        "rejected": statuses[ConversionStatus.REJECTED],
+        "rejected_by_stage": dict(sorted(Counter(r.stage for r in rejected).items())),
         "conversion_seconds": {"n": len(seconds), "median": statistics.median(seconds) if seconds else None,
                                "max": max(seconds) if seconds else None, "total": sum(seconds)},
         "conversion_stage_seconds": {stage: statistics.median(values) for stage, values in stage_seconds.items()},
         # the judge's parameter check: failing parameters compared with the new script's ranges, and not
-        "parameters_compared": sum(len((c.get("parameters") or {}).get("compared") or {}) for c in conversions),
+        "parameters_compared": sum(len((c.parameters or {}).get("compared") or {}) for c in conversions),
         "parameters_not_compared": sum(not_compared.values()),
         "parameters_not_compared_by_reason": not_compared,
     }
@@ -625,47 +505,42 @@ def _per_sampler(episodes: Sequence[EpisodeRecord], failures: Sequence[FailureEn
 
 
 def _per_scenario(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord],
-                  errors: Sequence[Mapping[str, Any]], failures: Sequence[FailureEntry],
-                  cluster_entries: Sequence[ClusterEntry], rate: FailureRate) -> Dict[str, Any]:
+                  errors: Sequence[EpisodeError], failures: Sequence[FailureEntry],
+                  cluster_entries: Sequence[ClusterEntry], rate: FailureRate) -> Dict[str, ScenarioSummary]:
     """Per scenario (the run's own, then any other an episode ran): its episodes, failures, failure rates (sampled
     and estimated), clusters and conversions."""
     ok = [r for r in episodes if not r.error]
     scenario_names = list(dict.fromkeys([*(settings.get("scenarios") or []),
                                          *sorted({str(r.scenario) for r in episodes})]))
-    scenarios: Dict[str, Any] = {}
+    scenarios: Dict[str, ScenarioSummary] = {}
     for name in scenario_names:
         ran = [r for r in ok if str(r.scenario) == name]
         found = [f for f in failures if str(f.scenario) == name]
         in_clusters = [c for c in cluster_entries if name in c.scenarios]
-        scenarios[name] = {
-            "episodes": len(ran),
-            "errors": sum(1 for e in errors if str(e["scenario"]) == name),
-            "failures": len(found),
-            "avoidable": sum(f.avoidable is True for f in found),
-            "unavoidable": sum(f.avoidable is False for f in found),
-            "unknown": sum(f.avoidable is None for f in found),
-            "failure_rate": _rate(len(found), len(ran)),
-            "estimated_rate": rate.scenarios[name].to_dict() if name in rate.scenarios else None,
-            "failures_by_type": _by_type(found),
-            "failure_types": len({str(f.kind) for f in found}),
-            "clusters": len(in_clusters),
-            "avoidable_clusters": sum(c.avoidable > 0 for c in in_clusters),
-            "converted": sum(c.conversion is not None for c in in_clusters),
-            "kept": sum(c.status == "kept" for c in in_clusters),
-        }
+        scenarios[name] = ScenarioSummary(
+            episodes=len(ran), errors=sum(1 for e in errors if str(e.scenario) == name), failures=len(found),
+            avoidable=sum(f.avoidable is True for f in found), unavoidable=sum(f.avoidable is False for f in found),
+            unknown=sum(f.avoidable is None for f in found), failure_rate=_rate(len(found), len(ran)),
+            estimated_rate=rate.scenarios[name].to_dict() if name in rate.scenarios else None,
+            failures_by_type=_by_type(found), failure_types=len({str(f.kind) for f in found}),
+            clusters=len(in_clusters), avoidable_clusters=sum(c.avoidable > 0 for c in in_clusters),
+            converted=sum(c.conversion is not None for c in in_clusters),
+            kept=sum(c.status == ConversionStatus.KEPT for c in in_clusters))
     return scenarios
 
 
 def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord],
-                              conversions: Sequence[Mapping[str, Any]], clusters: Mapping[int, str], *,
+                              conversions: Sequence[ConversionRecord], clusters: Mapping[int, str], *,
                               created: Optional[str] = None) -> MineReport:
     """The report (:class:`~dv2s_gym.mining.report_record.MineReport`) from records already read: ``settings`` (the
-    run's ``settings.json``), its episode records, its conversion records, and ``clusters``, which maps each failed
-    episode's index to its cluster id.
+    run's ``settings.json``), its episode records, its conversion records
+    (:class:`~dv2s_gym.mining.conversion.record.ConversionRecord`), and ``clusters``, which maps each failed episode's
+    index to its cluster id.
 
     Raises :class:`MiningReportError` when a failed episode has no cluster id.
     """
     default_sampler = str(settings.get("sampler") or "unknown")
+    conversions = [ConversionRecord.from_dict(c) for c in conversions]  # given as records or their JSON objects
     episodes = sorted(episodes, key=lambda r: int(r.index))
     ok = [r for r in episodes if not r.error]
     errors = _episode_errors(episodes, default_sampler)
@@ -688,15 +563,15 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ep
         "settings": dict(settings),
         "counts": counts,
         "samplers": samplers,
-        "scenarios": scenarios,
+        "scenarios": {name: entry.to_dict() for name, entry in scenarios.items()},
         "failure_rate": rate.to_dict(),
         "clusters": [c.to_dict() for c in cluster_entries if c.id not in unavoidable_ids],
         "unavoidable_clusters": [c.to_dict() for c in cluster_entries if c.id in unavoidable_ids],
         "failures": [f.to_dict() for f in failures if f.avoidable is not False],
         "unavoidable": [f.to_dict() for f in failures if f.avoidable is False],
-        "rejected": rejected,
-        "errors": errors,
-        "worker_restarts": restarts,
+        "rejected": [r.to_dict() for r in rejected],
+        "errors": [e.to_dict() for e in errors],
+        "worker_restarts": [r.to_dict() for r in restarts],
         "skipped_lines": {},
     }
     return MineReport.from_dict(_clean(report))
@@ -723,8 +598,8 @@ def _region_text(params: Mapping[str, Any], limit: int = 4) -> str:
     return ", ".join(parts) or "-"
 
 
-def _reproduction_text(cluster: Mapping[str, Any]) -> str:
-    reproduction = cluster.get("reproduction")
+def _reproduction_text(cluster: ClusterEntry) -> str:
+    reproduction = cluster.reproduction
     if not isinstance(reproduction, Mapping) or reproduction.get("rate") is None:
         return "-"
     text = f"{reproduction['rate']:.2f}"
@@ -741,10 +616,9 @@ def _cell(value: Any) -> str:
     return str("-" if value is None else value).replace("\n", " ").replace("|", "\\|")
 
 
-def headline(report: Union[MineReport, Mapping[str, Any]]) -> str:
-    """One line: what was mined and what came of it (``report``: a :class:`MineReport` or the object
-    ``report.json`` holds)."""
-    report = MineReport.from_dict(report)
+def headline(report: MineReport) -> str:
+    """One line: what was mined and what came of it."""
+    report = mine_report(report, "headline")
     counts, settings = report.counts, report.settings
     return (f"policy `{settings.get('policy')}`, sampler {settings.get('sampler')}, {seed_text(settings)}: "
             f"{counts.failures} failure(s) in {counts.episodes} episode(s) "
@@ -758,14 +632,14 @@ def headline(report: Union[MineReport, Mapping[str, Any]]) -> str:
 
 def _error_alarm(report: MineReport) -> str:
     errors = report.errors
-    first = str(errors[0].get("error") or "").strip().splitlines() if errors else []
+    first = str(errors[0].error or "").strip().splitlines() if errors else []
     counts = report.counts
     return error_warning(counts.errors, counts.errors + counts.episodes, first[-1] if first else "")
 
 
-def format_summary(report: Union[MineReport, Mapping[str, Any]]) -> str:
+def format_summary(report: MineReport) -> str:
     """The plain-text summary ``dv2s mine`` prints: the headline and the per-sampler table."""
-    report = MineReport.from_dict(report)
+    report = mine_report(report, "format_summary")
     rows = [("sampler", "episodes", "failures", "per 100 [95% CI]", "avoidable per 100", "clusters",
              "clusters per 100")]
     for name, entry in report.samplers.items():
@@ -776,30 +650,30 @@ def format_summary(report: Union[MineReport, Mapping[str, Any]]) -> str:
     lines = [headline(report).replace("`", ""), breadth(report.counts), rate_text(report.failure_rate)]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
     if report.rejected:
-        lines.append("rejected: " + "; ".join(f"{r['cluster']} ({r['reason']})" for r in report.rejected[:3])
+        lines.append("rejected: " + "; ".join(f"{r.cluster} ({r.reason})" for r in report.rejected[:3])
                      + (" ..." if len(report.rejected) > 3 else ""))
     return "\n".join(lines)
 
 
-def _type_text(cluster: Mapping[str, Any]) -> str:
+def _type_text(cluster: ClusterEntry) -> str:
     """The cluster's failure type with how and with whom, e.g. ``collision (rear_end, with car)``."""
-    details = list(cluster.get("collision_types") or {}) + [f"with {kind}" for kind in cluster.get("with_kinds") or {}]
-    return f"{cluster['type']} ({', '.join(details)})" if details else str(cluster["type"])
+    details = list(cluster.collision_types or {}) + [f"with {kind}" for kind in cluster.with_kinds or {}]
+    return f"{cluster.type} ({', '.join(details)})" if details else str(cluster.type)
 
 
-def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
+def _cluster_rows(clusters: Sequence[ClusterEntry]) -> List[str]:
     lines = ["| cluster | scenario | type | failures | avoidable | parameter region | representative | status | "
              "bank entry | reproduction | E2E-SC |",
              "|---|---|---|---:|---:|---|---|---|---|---|---:|"]
     for c in clusters:
-        rep = c["representative"]
-        status = c["status"] + (f" into `{c['merged_into']}`" if c.get("merged_into") else "")
-        video = f" [video]({c['video']})" if c.get("video") else ""
-        entries = ", ".join(f"`{_cell(name)}`" for name in c.get("scenarios") or [c["scenario"]])
-        lines.append(f"| `{_cell(c['id'])}` | {entries} | {_cell(_type_text(c))} | {c['size']} | "
-                     f"{c['avoidable']} | {_cell(_region_text(c['params']))} | #{rep['index']} seed {rep['seed']}"
-                     f"{video} | {_cell(status)} | {_cell(c.get('bank_entry'))} | {_reproduction_text(c)} | "
-                     f"{_num(c.get('e2e_sc'), 3)} |")
+        rep = c.representative
+        status = c.status + (f" into `{c.merged_into}`" if c.merged_into else "")
+        video = f" [video]({c.video})" if c.video else ""
+        entries = ", ".join(f"`{_cell(name)}`" for name in c.scenarios or [c.scenario])
+        lines.append(f"| `{_cell(c.id)}` | {entries} | {_cell(_type_text(c))} | {c.size} | "
+                     f"{c.avoidable} | {_cell(_region_text(c.params))} | #{rep.index} seed {rep.seed}"
+                     f"{video} | {_cell(status)} | {_cell(c.bank_entry)} | {_reproduction_text(c)} | "
+                     f"{_num(c.e2e_sc, 3)} |")
     return lines
 
 
@@ -851,11 +725,12 @@ def _scenario_lines(report: MineReport) -> List[str]:
              "failure types | avoidable | unavoidable | behaviours | converted | kept |",
              "|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|"]
     for name, s in report.scenarios.items():
-        estimate = s.get("estimated_rate")
+        estimate = s.estimated_rate
         estimated = f"{_pct(estimate)} ({_num((estimate or {}).get('ess'))})" if estimate else "-"
-        lines.append(f"| `{_cell(name)}` | {s['episodes']} | {s['failures']} | {_pct(s['failure_rate'])} | "
-                     f"{estimated} | {s.get('failure_types', '-')} | "
-                     f"{s['avoidable']} | {s['unavoidable']} | {s['clusters']} | {s['converted']} | {s['kept']} |")
+        types = "-" if s.failure_types is None else s.failure_types
+        lines.append(f"| `{_cell(name)}` | {s.episodes} | {s.failures} | {_pct(s.failure_rate)} | "
+                     f"{estimated} | {types} | "
+                     f"{s.avoidable} | {s.unavoidable} | {s.clusters} | {s.converted} | {s.kept} |")
     return lines
 
 
@@ -871,18 +746,19 @@ def _converted_lines(report: MineReport) -> List[str]:
     script), and the count of the conversions' parameter check."""
     counts = report.counts
     lines: List[str] = []
-    converted = [c for c in report.clusters + report.unavoidable_clusters if c.get("conversion")]
-    described = sorted((c for c in converted if c["status"] in ("kept", "merged")), key=lambda c: c["status"] != "kept")
+    converted = [c for c in report.clusters + report.unavoidable_clusters if c.conversion is not None]
+    described = sorted((c for c in converted if c.status in (ConversionStatus.KEPT, ConversionStatus.MERGED)),
+                       key=lambda c: c.status != ConversionStatus.KEPT)
     if described:
         lines += ["", "### Converted failures", ""]
         for c in described:
-            where = f"bank entry `{c['bank_entry']}`" if c.get("bank_entry") else (
-                f"merged into `{c['merged_into']}`" if c.get("merged_into") else c["status"])
-            lines.append(f"- `{_cell(c['id'])}` ({where}; reproduction {_reproduction_text(c)}; "
-                         f"E2E-SC {_num(c.get('e2e_sc'), 3)}): video {c.get('video') or '-'}, script "
-                         f"{c.get('script') or '-'}")
-            if c.get("description"):
-                lines.append(f"  > {_cell(c['description'])}")
+            where = f"bank entry `{c.bank_entry}`" if c.bank_entry else (
+                f"merged into `{c.merged_into}`" if c.merged_into else c.status)
+            lines.append(f"- `{_cell(c.id)}` ({where}; reproduction {_reproduction_text(c)}; "
+                         f"E2E-SC {_num(c.e2e_sc, 3)}): video {c.video or '-'}, script "
+                         f"{c.script or '-'}")
+            if c.description:
+                lines.append(f"  > {_cell(c.description)}")
     lines += _replay_entry_lines(converted)
     if counts.parameters_compared or counts.parameters_not_compared:
         lines += ["", parameter_check_text(counts) + " (each conversion record lists the parameters not compared, "
@@ -890,18 +766,18 @@ def _converted_lines(report: MineReport) -> List[str]:
     return lines
 
 
-def _replay_entry_lines(converted: Sequence[Mapping[str, Any]]) -> List[str]:
+def _replay_entry_lines(converted: Sequence[ClusterEntry]) -> List[str]:
     """The exact replay entries the conversions kept in the bank, each with the parameters its replay could not
     narrow around the failing values (drawn as the parent draws them) and why."""
-    kept = [c for c in converted if c.get("replay_entry")]
+    kept = [c for c in converted if c.replay_entry]
     if not kept:
         return []
     lines = ["", "### Exact replay entries", "",
              "Each replays its failing scene with the parent's parameters narrowed around the failing values; the "
              "parameters listed could not be narrowed and are drawn as in the parent.", ""]
     for c in kept:
-        missed = c.get("replay_not_narrowed") or {}
-        lines.append(f"- `{_cell(c['replay_entry'])}` (cluster `{_cell(c['id'])}`): "
+        missed = c.replay_not_narrowed or {}
+        lines.append(f"- `{_cell(c.replay_entry)}` (cluster `{_cell(c.id)}`): "
                      + ("every parameter narrowed" if not missed else "not narrowed: " + "; ".join(
                          f"{_cell(name)} ({_cell(why)})" for name, why in sorted(missed.items()))))
     return lines
@@ -914,7 +790,7 @@ def _rejected_lines(report: MineReport) -> List[str]:
     lines = ["", f"### Rejected conversions ({len(report.rejected)})", "",
              "By stage: " + ", ".join(f"{s} {n}" for s, n in report.counts.rejected_by_stage.items()), "",
              "| cluster | episode | stage | reason |", "|---|---:|---|---|"]
-    lines += [f"| `{_cell(r['cluster'])}` | {_cell(r['index'])} | {_cell(r['stage'])} | {_cell(r['reason'])} |"
+    lines += [f"| `{_cell(r.cluster)}` | {_cell(r.index)} | {_cell(r.stage)} | {_cell(r.reason)} |"
               for r in report.rejected]
     return lines
 
@@ -926,9 +802,9 @@ def _unavoidable_lines(report: MineReport) -> List[str]:
     if report.unavoidable_clusters:
         lines += [""] + _cluster_rows(report.unavoidable_clusters)
     if report.unavoidable:
-        lines += [""] + [f"- #{f['index']} `{_cell(f['scenario'])}` seed {f['seed']}: {f['type']} "
-                         f"(reference: {_cell(((f.get('reference') or {}).get('failure') or {}).get('type'))}); "
-                         f"cluster `{_cell(f['cluster'])}`" for f in report.unavoidable[:50]]
+        lines += [""] + [f"- #{f.index} `{_cell(f.scenario)}` seed {f.seed}: {f.type} "
+                         f"(reference: {_cell(((f.reference or {}).get('failure') or {}).get('type'))}); "
+                         f"cluster `{_cell(f.cluster)}`" for f in report.unavoidable[:50]]
         if len(report.unavoidable) > 50:
             lines.append(f"- ... and {len(report.unavoidable) - 50} more (see report.json)")
     return lines
@@ -938,11 +814,11 @@ def _replay_lines(report: MineReport) -> List[str]:
     """The command that replays a failure exactly from its trace (none without a failure that has one)."""
     if not report.failures:
         return []
-    example = next((f for f in report.failures if f.get("trace")), None)
+    example = next((f for f in report.failures if f.trace), None)
     if not example:
         return []
     return ["", f"Replay a failure exactly from its trace: `dv2s replay {report.run_dir or '.'}/"
-                f"{example['trace']} --video failure.webm`."]
+                f"{example.trace} --video failure.webm`."]
 
 
 def _trouble_lines(report: MineReport) -> List[str]:
@@ -951,14 +827,14 @@ def _trouble_lines(report: MineReport) -> List[str]:
     lines: List[str] = []
     if report.errors:
         lines += ["", f"### Errors ({len(report.errors)})", ""]
-        lines += [f"- #{e['index']} `{_cell(e['scenario'])}` seed {e['seed']}: {_cell(e['error'].splitlines()[0] if e['error'] else '')}"
+        lines += [f"- #{e.index} `{_cell(e.scenario)}` seed {e.seed}: {_cell(e.error.splitlines()[0] if e.error else '')}"
                   for e in report.errors[:20]]
         if len(report.errors) > 20:
             lines.append(f"- ... and {len(report.errors) - 20} more (see report.json)")
     if report.worker_restarts:
         lines += ["", f"### Worker restarts ({len(report.worker_restarts)})", "",
                   "Episodes whose worker crashed or hung (`--timeout`) and were finished by a new worker:", ""]
-        lines += [f"- #{r['index']} `{_cell(r['scenario'])}` seed {r['seed']}: {_cell('; then '.join(r['problems']))}"
+        lines += [f"- #{r.index} `{_cell(r.scenario)}` seed {r.seed}: {_cell('; then '.join(r.problems))}"
                   for r in report.worker_restarts[:20]]
     if report.skipped_lines:
         lines += ["", "Left out (truncated last lines of a killed run): "
@@ -966,9 +842,9 @@ def _trouble_lines(report: MineReport) -> List[str]:
     return lines
 
 
-def markdown(report: Union[MineReport, Mapping[str, Any]]) -> str:
+def markdown(report: MineReport) -> str:
     """The report as Markdown: summary, per sampler, per scenario, clusters, conversions, unavoidable, errors."""
-    report = MineReport.from_dict(report)
+    report = mine_report(report, "markdown")
     lines = (_summary_lines(report) + _sampler_lines(report) + _scenario_lines(report) + _cluster_lines(report)
              + _converted_lines(report) + _rejected_lines(report) + _unavoidable_lines(report)
              + _replay_lines(report) + _trouble_lines(report))
@@ -976,21 +852,20 @@ def markdown(report: Union[MineReport, Mapping[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def write_reports(run_dir: PathLike, report: Union[MineReport, Mapping[str, Any], None] = None, *,
+def write_reports(run_dir: PathLike, report: Optional[MineReport] = None, *,
                   embed_videos: bool = True) -> Dict[str, Path]:
     """Write ``report.json`` (atomic), ``report.md`` and ``report.html`` into the run folder.
 
     Args:
         run_dir: the run folder (``--out`` of ``dv2s mine``).
-        report: a report already built from it (a :class:`MineReport` or the JSON object ``report.json`` holds;
-            default: :func:`build_report`).
+        report: a report already built from it (a :class:`MineReport`; default: :func:`build_report`).
         embed_videos: embed the failure videos in the HTML page (else it links them relatively).
 
     Returns:
         ``{"json": path, "markdown": path, "html": path}``.
     """
     run_dir = Path(run_dir)
-    report = MineReport.from_dict(report) if report is not None else build_report(run_dir)
+    report = mine_report(report, "write_reports") if report is not None else build_report(run_dir)
     return {"json": atomic_write_json(run_dir / "report.json", report.to_dict()),
             "markdown": atomic_write_text(run_dir / "report.md", markdown(report)),
             "html": write_html(report, run_dir / "report.html", base=run_dir, embed_videos=embed_videos)}

@@ -78,6 +78,7 @@ from dv2s_gym.mining.conversion.files import (cluster_slug, CONVERSION_DIR, ENTR
                                               ENTRY_VIDEO, relative_to_run, run_relative, write_run_file)
 from dv2s_gym.mining.conversion.judge import judge_conversion
 from dv2s_gym.mining.conversion.parameters import compare_parameters, parent_script
+from dv2s_gym.mining.conversion.record import ConversionRecord, ConversionStatus
 from dv2s_gym.mining.conversion.rejection import check_settings, ConversionRejected, SETUP_ERRORS, stage_error
 from dv2s_gym.mining.conversion.replay import (add_replay, link_entries, replay_failure_entry, replay_without_video,
                                                ReplaySource)
@@ -123,7 +124,7 @@ def _mined_name(parent: str, failure_type: str) -> str:
 
 
 def convert_failure(record: EpisodeRecord, run_dir: PathLike, settings: ConversionSettings, *,
-                    bank: Any, cluster: Optional[str] = None) -> Dict[str, Any]:
+                    bank: Any, cluster: Optional[str] = None) -> ConversionRecord:
     """Turn one failure record into a bank entry; returns the conversion record (never raises for a bad failure).
 
     Args:
@@ -143,7 +144,9 @@ def convert_failure(record: EpisodeRecord, run_dir: PathLike, settings: Conversi
     and :class:`~scenario_bank.records.RecordError` for a record that is no episode record (a field of the wrong kind,
     or no ``index``, ``scenario`` or ``seed``); every other problem is a rejection.
 
-    Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
+    Returns the :class:`~dv2s_gym.mining.conversion.record.ConversionRecord` whose JSON object is ``{"cluster",
+    "index", "status": "kept"|"merged"|"rejected" (a :class:`~dv2s_gym.mining.conversion.record.ConversionStatus`),
+    "reason", "stage", "video",
     "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
     "timings", "interaction", "replay_entry", "avoidability", "rejections", "actors", "parameters"}`` (paths
     relative to ``run_dir``; ``actors`` and ``parameters``: the judge's comparisons of the failure with the new
@@ -154,7 +157,8 @@ def convert_failure(record: EpisodeRecord, run_dir: PathLike, settings: Conversi
     ``rejections``: every judge check that failed, the first one is ``reason``).
     """
     check_settings(settings, "convert_failure")
-    return _Conversion(EpisodeRecord.from_dict(record), Path(run_dir), settings, bank, cluster).run()
+    return ConversionRecord.from_dict(
+        _Conversion(EpisodeRecord.from_dict(record), Path(run_dir), settings, bank, cluster).run())
 
 
 class _Conversion:
@@ -168,7 +172,7 @@ class _Conversion:
         self.folder = run_dir / "failures" / cluster_slug(self.cluster, record.index)
         self.conversion = self.folder / CONVERSION_DIR
         self.out: Dict[str, Any] = {
-            "cluster": self.cluster, "index": record.index, "status": "rejected", "reason": None,
+            "cluster": self.cluster, "index": record.index, "status": ConversionStatus.REJECTED.value, "reason": None,
             "stage": None, "video": None, "description": None, "script": None, "reproduction": None,
             "e2e_sc": None, "bank_entry": None, "merged_into": None, "seconds": None, "timings": {},
             "interaction": None, "replay_entry": None, "avoidability": None, "rejections": [], "actors": None,
@@ -410,9 +414,9 @@ class _Conversion:
         outcome = self.bank.add(self.generation.script, fields, files=files, on_duplicate="merge",
                                 near_copy_of=_family(record.scenario, self.source_failure["type"]))
         if outcome.status == "added":
-            out.update(status="kept", bank_entry=outcome.entry.name)
+            out.update(status=ConversionStatus.KEPT.value, bank_entry=outcome.entry.name)
         else:
-            out.update(status="merged", merged_into=outcome.entry.name, merge_reason=outcome.how)
+            out.update(status=ConversionStatus.MERGED.value, merged_into=outcome.entry.name, merge_reason=outcome.how)
         if self.replay["entry"]:
             link_entries(self.bank, self.replay["entry"], {"converted": outcome.entry.name})
         self.lap("bank")
