@@ -36,22 +36,15 @@ ROOT = Path(__file__).resolve().parents[1]
 DV2S_GYM = ROOT / "dv2s_gym"
 
 TYPED_MODULES = ("mining.behaviour", "mining.cluster", "mining.family", "mining.sampling.rate", "mining.report",
-                 "mining.miner", "loop.split", "loop.run", "loop.record", "loop.report", "loop.verdict")
+                 "mining.report_record", "mining.html", "mining.conversion.record", "mining.miner", "loop.split",
+                 "loop.run", "loop.record", "loop.report", "loop.verdict")
 """The modules of the miner and the loop (under ``dv2s_gym``) whose functions pass typed records."""
 
 JSON_BOUNDARIES: Dict[str, str] = {
     "mining.report.read_jsonl": "reads the JSON objects of a run's .jsonl files: the file format",
-    "mining.report.read_run": "returns the run's conversion records as read; their format is owned by the conversion "
-                       "(dv2s_gym.mining.conversion.convert), which has no typed record for them yet",
-    "mining.report.build_report_from_records": "takes the run's settings.json and conversion records as read",
-    "mining.report.headline": "renders a MineReport or the JSON object report.json holds",
-    "mining.report.format_summary": "renders a MineReport or the JSON object report.json holds",
-    "mining.report.markdown": "renders a MineReport or the JSON object report.json holds",
-    "mining.report.write_reports": "writes a MineReport, or the JSON object report.json holds, and its renderings",
+    "mining.report.build_report_from_records": "takes the run's settings.json as recorded (RunSettings.values)",
+    "mining.behaviour.Behaviour.from_dict": "reads the behaviour's JSON object, as report.json holds it",
     "mining.sampling.rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
-    "mining.miner.convert_clusters": "returns the run's conversion records as conversions.jsonl holds them; their format "
-                              "is owned by the conversion (dv2s_gym.mining.conversion.convert), which has no typed record for "
-                              "them yet",
     "loop.run.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
     "loop.run.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
     "loop.run.heldout_comparison": "takes the held-out store's rows (heldout.jsonl; HeldOutEpisode records or their "
@@ -395,7 +388,10 @@ def test_the_mining_report_is_a_typed_record_written_as_report_json():
     assert "run_dir" in saved and saved["run_dir"] is None  # every field is written, null included
     again = MineReport.from_dict(saved)
     assert json.dumps(again.to_dict(), sort_keys=True) == json.dumps(saved, sort_keys=True)
-    assert markdown(saved) == markdown(report) and format_summary(saved) == format_summary(report)
+    assert markdown(again) == markdown(report) and format_summary(again) == format_summary(report)
+    with pytest.raises(TypeError, match="markdown takes a MineReport, not dict; read a report.json with "
+                                        r"MineReport.from_dict"):
+        markdown(saved)  # the renderings take the record: report.json is read into one where it is read
     with pytest.raises(RecordError, match="'counts.failures'"):
         MineReport.from_dict({**saved, "counts": {**saved["counts"], "failures": "none"}})
 
@@ -415,3 +411,66 @@ def test_loop_json_s_settings_and_start_are_typed_records():
         RecordedLoopSettings.from_dict({**settings, "workers": "two"})
     with pytest.raises(RecordError, match="'scenarios'"):
         LoopStart.from_dict({"bank": "/b", "scenarios": "a"})
+
+
+_CONVERSION = {"cluster": "a/collision/r0", "index": 3, "status": "merged", "reason": None, "stage": None,
+               "video": "failures/a/failure.webm", "description": "a car brakes", "script": None,
+               "reproduction": {"k": 2, "reproduced": 1, "rate": 0.5}, "e2e_sc": 0.71, "bank_entry": None,
+               "merged_into": "mined_a", "merge_reason": "near copy", "seconds": 1.5, "timings": {"video": 0.5},
+               "interaction": None, "replay_entry": "replay_a", "avoidability": None, "rejections": [],
+               "actors": None, "parameters": None, "converted_video": None, "later_key": [1, 2]}
+
+
+def test_a_conversion_record_is_typed_with_its_status_and_writes_back_the_same_line(tmp_path):
+    from dv2s_gym.mining.conversion.record import ConversionRecord, ConversionStatus, read_conversions
+    from dv2s_gym.mining.jsonl import JsonlAppender
+    from scenario_bank.records import RecordError
+
+    record = ConversionRecord.from_dict(_CONVERSION)
+    assert record.status is ConversionStatus.MERGED and record.merged and not record.kept and not record.rejected
+    assert (record.merged_into, record.rejections, record.extra) == ("mined_a", (), {"later_key": [1, 2]})
+    assert record.to_dict() == _CONVERSION
+    path = tmp_path / "conversions.jsonl"
+    appender = JsonlAppender(path)
+    appender.append(record)
+    appender.close()
+    assert path.read_text() == json.dumps(_CONVERSION, sort_keys=True) + "\n"  # the line the dict wrote
+    assert [r.to_dict() for r in read_conversions(path)] == [_CONVERSION]
+    with pytest.raises(RecordError, match="'status' must be one of 'kept', 'merged', 'rejected', not 'lost'"):
+        ConversionRecord.from_dict({**_CONVERSION, "status": "lost"})
+    path.write_text(json.dumps({**_CONVERSION, "index": "three"}) + "\n")
+    with pytest.raises(RecordError, match=r"conversions.jsonl, record 1: conversion record field 'index'"):
+        read_conversions(path)
+
+
+def test_the_mining_report_holds_its_clusters_and_failures_as_records():
+    from dv2s_gym.mining.behaviour import Behaviour
+    from dv2s_gym.mining.conversion.record import ConversionRecord, ConversionStatus
+    from dv2s_gym.mining.report import build_report_from_records
+    from dv2s_gym.mining.report_record import (ClusterEntry, FailureEntry, MineReport, RejectedConversion,
+                                               ScenarioSummary)
+    from scenario_bank.records import EpisodeRecord
+
+    failed = EpisodeRecord.from_dict({
+        "index": 3, "scenario": "a", "family": "a", "seed": 7, "policy": "p", "params": {"gap": 4.0},
+        "sampler": "random",
+        "failure": {"type": "collision", "kind": "collision:rear_end", "time": 2.0, "with": "car1",
+                    "with_kind": "car", "collision_type": "rear_end"}, "avoidable": True, "rho": -1.0,
+        "behaviour": {"actor": "car", "actor_manoeuvre": "braking", "ego_manoeuvre": "following"}})
+    rejected = {**_CONVERSION, "cluster": "b/stall/r0", "index": 9, "status": "rejected", "stage": "check",
+                "reason": "check: compile failed", "merged_into": None, "rejections": ["check: compile failed"]}
+    report = build_report_from_records({"policy": "p", "sampler": "random", "scenarios": ["a"]}, [failed],
+                                       [_CONVERSION, rejected], {3: "a/collision/r0"})
+    (cluster,) = report.clusters
+    assert isinstance(cluster, ClusterEntry) and isinstance(cluster.representative, FailureEntry)
+    assert isinstance(cluster.conversion, ConversionRecord) and cluster.status == ConversionStatus.MERGED
+    assert cluster.behaviour == Behaviour(actor="car", actor_manoeuvre="braking", ego_manoeuvre="following")
+    assert (cluster.merged_into, cluster.representative.with_actor, cluster.scenarios) == ("mined_a", "car1", ("a",))
+    assert [type(f) for f in report.failures] == [FailureEntry] and report.failures[0].seed == 7
+    assert isinstance(report.scenarios["a"], ScenarioSummary) and report.scenarios["a"].failures == 1
+    assert [(type(r), r.stage, r.rejections) for r in report.rejected] == [
+        (RejectedConversion, "check", ("check: compile failed",))]
+    saved = json.loads(json.dumps(report.to_dict(), sort_keys=True))
+    assert saved["clusters"][0]["representative"]["with"] == "car1" and saved["clusters"][0]["status"] == "merged"
+    assert saved["clusters"][0]["conversion"] == _CONVERSION
+    assert json.dumps(MineReport.from_dict(saved).to_dict(), sort_keys=True) == json.dumps(saved, sort_keys=True)
