@@ -65,11 +65,11 @@ def main(argv=None) -> int:
     run = mine(args.policy, MineSettings(budget=args.budget, sampler="random", seed=args.seed, reference=None),
                out=work / "run", workers=WorkerSettings(workers=1), progress=False, reports=False)
     mining = time.perf_counter() - t0
-    failed = [r for r in sorted(run.records, key=lambda r: r["index"]) if r.get("failure") and not r.get("error")]
+    failed = [r for r in sorted(run.records, key=lambda r: r.index) if r.failed]
     chosen, seen = [], set()
     for record in failed:
-        if record["scenario"] not in seen:
-            seen.add(record["scenario"])
+        if record.scenario not in seen:
+            seen.add(record.scenario)
             chosen.append(record)
     chosen = chosen[:args.failures]
     print(f"mined {len(run.records)} episodes in {mining:.1f} s: {len(failed)} failures in {len(seen)} scenarios; "
@@ -79,25 +79,25 @@ def main(argv=None) -> int:
     for record in chosen:
         start = time.perf_counter()
         out = convert_failure(record, work / "run", ConversionSettings(policy=args.policy, k=args.k), bank=work / "bank",
-                              cluster=f"{record['scenario']}/{record['failure']['type']}/bench")
+                              cluster=f"{record.scenario}/{record.failure['type']}/bench")
         wall = time.perf_counter() - start
         baseline = None
-        if not args.no_baseline and out.get("video"):
+        if not args.no_baseline and out.video:
             os.environ["DV2S_SANDBOX_CACHE"] = "0"  # the baseline's own sandbox run, not the conversion's cached pass
             try:
                 start = time.perf_counter()
-                convert_video(work / "run" / out["video"], work / "baseline" / record["scenario"])
+                convert_video(work / "run" / out.video, work / "baseline" / record.scenario)
                 baseline = time.perf_counter() - start
             finally:
                 del os.environ["DV2S_SANDBOX_CACHE"]
-        rate = (out.get("reproduction") or {}).get("rate")
-        rows.append({"scenario": record["scenario"], "failure": record["failure"].get("kind"), "status": out["status"],
-                     "stage": out["stage"], "reason": out["reason"], "rate": rate, "e2e_sc": out["e2e_sc"],
-                     "seconds": wall, "timings": out["timings"], "baseline_seconds": baseline})
-        print(f"  {record['scenario']:<38} {out['status']:<8} {wall:6.2f} s  rate {rate if rate is None else f'{rate:.1f}'}"
-              f"  e2e {out['e2e_sc'] if out['e2e_sc'] is None else round(out['e2e_sc'], 2)}"
+        rate = (out.reproduction or {}).get("rate")
+        rows.append({"scenario": record.scenario, "failure": record.failure.get("kind"), "status": str(out.status),
+                     "stage": out.stage, "reason": out.reason, "rate": rate, "e2e_sc": out.e2e_sc,
+                     "seconds": wall, "timings": out.timings, "baseline_seconds": baseline})
+        print(f"  {record.scenario:<38} {str(out.status):<8} {wall:6.2f} s  rate {rate if rate is None else f'{rate:.1f}'}"
+              f"  e2e {out.e2e_sc if out.e2e_sc is None else round(out.e2e_sc, 2)}"
               f"  baseline {baseline if baseline is None else round(baseline, 2)} s"
-              + (f"  ({out['reason']})" if out["status"] == "rejected" else ""))
+              + (f"  ({out.reason})" if out.rejected else ""))
 
     seconds = [row["seconds"] for row in rows]
     valid = [row["seconds"] for row in rows if row["status"] in ("kept", "merged")]

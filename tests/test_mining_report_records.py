@@ -9,6 +9,7 @@ from pathlib import Path
 
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.html import _cards, _Videos
+from dv2s_gym.mining.report_record import ClusterEntry
 from dv2s_gym.loop.record import RoundRecord
 from dv2s_gym.loop.report import _entry_clips
 from loop_helpers import written_report
@@ -56,11 +57,13 @@ def test_a_merged_clusters_clip_is_captioned_as_its_own_script_in_the_mining_rep
                "representative": {"index": 0, "seed": 4}, "status": "merged", "merged_into": "s_mined_collision",
                "bank_entry": None, "video": "failures/failure.webm", "converted_video": "failures/converted.webm",
                "reproduction": {"clip": CLIP}, "conversion": {"merge_reason": "a near-copy"}}
-    page = _cards([cluster], _Videos(tmp_path, tmp_path, False, 0), tmp_path, {"policy": "keep_lane"})
+    page = _cards([ClusterEntry.from_dict(cluster)], _Videos(tmp_path, tmp_path, False, 0), tmp_path,
+                  {"policy": "keep_lane"})
     assert "generated scenario s_mined_collision (the converted script)" not in page
     assert "the script converted from a failure merged into s_mined_collision" in page
     kept = {**cluster, "status": "kept", "bank_entry": "s_mined_collision", "merged_into": None}
-    page = _cards([kept], _Videos(tmp_path, tmp_path, False, 0), tmp_path, {"policy": "keep_lane"})
+    page = _cards([ClusterEntry.from_dict(kept)], _Videos(tmp_path, tmp_path, False, 0), tmp_path,
+                  {"policy": "keep_lane"})
     assert "generated scenario s_mined_collision (the converted script) driven by keep_lane" in page
 
 

@@ -1,11 +1,14 @@
 """The mining report: what a ``dv2s mine`` run found, read back from its run folder.
 
 :func:`build_report` reads a run folder (``settings.json``, ``episodes.jsonl`` as
-:class:`~scenario_bank.records.EpisodeRecord`, ``conversions.jsonl``; record formats in the mining contract), groups
+:class:`~scenario_bank.records.EpisodeRecord`, ``conversions.jsonl`` as
+:class:`~dv2s_gym.mining.conversion.record.ConversionRecord`; record formats in the mining contract), groups
 the failures into clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns the report as a
-:class:`~dv2s_gym.mining.report_record.MineReport`, whose ``to_dict`` is the JSON below (in process each failure is
-a :class:`FailureEntry` and each cluster a :class:`ClusterEntry` before the report holds their JSON objects);
-:func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
+:class:`~dv2s_gym.mining.report_record.MineReport`, whose ``to_dict`` is the JSON below (its clusters are
+:class:`~dv2s_gym.mining.report_record.ClusterEntry` records, its failures
+:class:`~dv2s_gym.mining.report_record.FailureEntry` records, and so on: :mod:`dv2s_gym.mining.report_record`);
+:func:`headline`, :func:`format_summary`, :func:`markdown` and the page take the record only (read a ``report.json``
+with ``MineReport.from_dict``); :func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
 self-contained ``report.html`` (:mod:`dv2s_gym.mining.html`). Nothing here imports Scenic
 or highway-env, so a report is rebuilt in well under a second from any run folder, also
 from one whose run was killed (a truncated last line of a ``.jsonl`` file is left out).
