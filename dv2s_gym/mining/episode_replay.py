@@ -40,16 +40,16 @@ def replay_mined_episode(folder: PathLike, episode: Optional[str], *, policy: Op
         raise MiningError(f"{folder} is a mining run: name the episode with --episode INDEX (report.md lists the "
                          "failures and their indices)")
     settings_file = str(settings.path)
-    records = {int(r["index"]): r for r in read_records(folder / "episodes.jsonl")}
+    records = {int(r.index): r for r in read_records(folder / "episodes.jsonl")}
     record = records.get(int(episode))
-    if record is None or record.get("error") or not record.get("result"):
+    if record is None or record.error or not record.result:
         raise MiningError(f"episode {episode} of {folder} did not finish (not in episodes.jsonl, or an error); "
                          f"it has episodes 0..{max(records) if records else -1}")
     if not policy:
         policy = spec_from_file(settings.policy, settings_file, "--policy-spec SPEC")
     options = {"policy": policy, "bank_dir": settings.bank_dir,
                "env_config": check_file_config(settings.env_config, settings_file)}
-    if video and record.get("failure"):
+    if video and record.failure:
         write_failure_video(record, video, trace_path=Path(video).with_suffix(".json.gz"), **options)
     else:
         _, _, frames = rerun_failure(record, render=bool(video), **options)
