@@ -246,9 +246,9 @@ def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tm
                failing(2, "truck", -2.0, {"type": "stall"}), failing(3, "truck", -1.0, {"type": "collision"})]
     taken = []
 
-    def convert(record, out, settings, *, bank):
-        taken.append(record["index"])
-        return {"cluster": record["cluster"], "index": record["index"], "status": "rejected"}
+    def convert(record, out, settings, *, bank, cluster):
+        taken.append(record.index)
+        return {"cluster": cluster, "index": record.index, "status": "rejected"}
 
     monkeypatch.setattr(miner, "convert_failure", convert)
     monkeypatch.setattr(miner, "_reached_bank", lambda *_: None)

@@ -77,7 +77,7 @@ from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 from scenario_bank.bank import Bank, BankError
 from scenario_bank.extras import missing_extra_message
-from scenario_bank.records import EpisodeRecord, RecordError
+from scenario_bank.records import EpisodeRecord, JsonRecord, RecordError
 from scenario_bank.failure_types import failure_table
 from scenario_bank.jail import JailUnavailableError, require_jail
 from scenario_bank.run_identity import check_format, check_identity, record_format
@@ -405,7 +405,8 @@ def _run_chunks(mining: _Mining, scene_sampler: SceneSampler, pool, recorder: "_
         tasks = [mining.task(i, specs[i]) for i in indices if i not in done and i < budget]
         by_id = {t.id: t for t in tasks}
 
-        def handle(result: Dict[str, Any]) -> None:
+        def handle(result: Any) -> None:
+            result = _worker_result(result)
             task = by_id[result["id"]]
             recorder.add(result, task, specs[task.index])
 
@@ -440,7 +441,8 @@ def _run_window(mining: _Mining, window: WindowSchedule, pool, recorder: "_Recor
             tasks.append(task.to_json())
         return tasks
 
-    def handle(result: Dict[str, Any]) -> None:
+    def handle(result: Any) -> None:
+        result = _worker_result(result)
         task = by_id.pop(result["id"])
         recorder.add(result, task, specs.pop(task.index))
 
@@ -680,6 +682,13 @@ def _with_proposal(spec, proposal: Optional[Dict[str, Any]]):
     return spec
 
 
+def _worker_result(result: Any) -> Dict[str, Any]:
+    """A worker's result as its JSON object: the episode record the task returned
+    (:func:`~dv2s_gym.mining.tasks.run_mine_task`), or the error result a backend gives for a crashed or hung
+    worker (a JSON object already)."""
+    return result.to_dict() if isinstance(result, JsonRecord) else dict(result)
+
+
 def _complete(result: Dict[str, Any], task: MineTask, spec, sampler: str, out: Path) -> EpisodeRecord:
     """The episode record from a worker's result (or a backend's error result for a crashed or hung worker)."""
     taken = {k: v for k, v in result.items()
@@ -757,7 +766,7 @@ def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: 
             row = _reached_bank(bank, run.out, cluster)  # killed after the bank write, before its line
             if row is None:
                 try:
-                    row = convert_failure(dict(record, cluster=cluster), run.out, conversion, bank=bank)
+                    row = convert_failure(record, run.out, conversion, bank=bank, cluster=cluster)
                 except SETUP_ERRORS as error:
                     first = (str(error).strip().splitlines() or [type(error).__name__])[0]
                     raise MiningError(f"converting stopped at cluster {cluster} ({len(existing)} converted, the rest "

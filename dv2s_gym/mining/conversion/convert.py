@@ -137,7 +137,7 @@ def convert_failure(record: EpisodeRecord, run_dir: PathLike, settings: Conversi
             and ``after`` after it (a stall's clip covers the stall, up to the monitor's ``stall_seconds``, between
             them: :func:`~dv2s_gym.mining.conversion.failure_video.write_failure_video`).
         bank: the bank to add to (a :class:`~scenario_bank.bank.Bank` or its folder).
-        cluster: the failure's cluster id (default the record's ``cluster`` key, which the miner adds).
+        cluster: the failure's cluster id, which the miner passes (default the record's ``cluster`` key).
 
     Raises the model backends' setup errors (:data:`~dv2s_gym.mining.conversion.rejection.SETUP_ERRORS`), and
     ``WrongTypeError`` (a ``TypeError``) for settings that are not a :class:`ConversionSettings` or name no policy,
