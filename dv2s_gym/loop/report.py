@@ -101,7 +101,7 @@ import re
 from dv2s_gym.mining.conversion.files import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
 from dv2s_gym.loop.errored import merged_messages, messages_text
 from dv2s_gym.loop.record import (
-    ControlTable, ErroredEpisodes, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, Rate, ReferenceGate, RegressSummary,
+    ControlTable, ErroredEpisodes, FinalVsStart, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, ReferenceGate, RegressSummary,
     RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
 from dv2s_gym.mining.report_text import by_type_text, clip_caption
 from dv2s_gym.loop.verdict import (ACCEPTED, HELDOUT_ALPHA, Recommendation, evidence_floor_note,
@@ -111,6 +111,7 @@ from dv2s_gym.regress.report import build_report, load_report, write_json
 from html import escape
 from pathlib import Path
 from policies.card_record import FineTuneMethod
+from policies.stats import Rate
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.entries import SIDECAR, read_json
 from typing import Any, Dict, List, Mapping, Optional
@@ -155,7 +156,7 @@ def _regress_report_path(stored: str, folder: Optional[Path]) -> Path:
 
 
 def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
-                   folder: Optional[Path] = None) -> Optional[Dict[str, Any]]:
+                   folder: Optional[Path] = None) -> Optional[FinalVsStart]:
     """The final policy against the starting policy on the starting bank, from the rounds' regression reports.
 
     ``None`` unless two or more rounds finished their regression test. The first tested round's baseline
@@ -163,7 +164,8 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
     (the final policy) ran the same scenarios and seeds; their episodes are paired by id and judged as
     ``dv2s regress`` does (:func:`dv2s_gym.regress.report.build_report`). With ``out`` the paired report is
     written to ``out/final_vs_start/report.json``. A report that cannot be read, or a starting-bank scenario
-    that changed between the rounds, gives ``{"error": reason}`` instead (and the verdict is then NOT ACCEPTED).
+    that changed between the rounds, gives a record holding only its ``error`` instead (and the verdict is then NOT
+    ACCEPTED).
     ``folder``: the loop folder the reports are read from (default ``out``; see :func:`_regress_report_path`).
     """
     tested = [r for r in _rounds(report) if r.steps.regress is not None and r.steps.regress.report]
@@ -175,20 +177,20 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
         start = load_report(_regress_report_path(first.steps.regress.report, folder))
         final = load_report(_regress_report_path(last.steps.regress.report, folder))
     except Exception as error:  # noqa: BLE001 - a missing or foreign report is a line of the loop report
-        return {"error": f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}"}
+        return FinalVsStart.failed(f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}")
     start_bank, final_bank = start.bank or BankInfo(), final.bank or BankInfo()
     names = list(start_bank.scenarios or ())
     hashes = [start_bank.hashes or {}, final_bank.hashes or {}]
     changed = [n for n in names if hashes[0].get(n) != hashes[1].get(n)]
     if changed or names != list(final_bank.scenarios or ()):
-        return {"error": f"the starting bank differs between round {first.round} and round "
-                         f"{last.round} ({', '.join(changed[:3]) or 'scenario list'}); no paired comparison"}
+        return FinalVsStart.failed(f"the starting bank differs between round {first.round} and round "
+                                   f"{last.round} ({', '.join(changed[:3]) or 'scenario list'}); no paired comparison")
     baseline = {e.id: e.baseline for e in start.episodes or ()}
     episodes = [PairedEpisode(id=e.id, scenario=e.scenario, seed=e.seed, candidate=e.candidate,
                               baseline=baseline[e.id])
                 for e in final.episodes or () if baseline.get(e.id) is not None]
     if not episodes:
-        return {"error": f"round {first.round} and round {last.round} share no regression episode"}
+        return FinalVsStart.failed(f"round {first.round} and round {last.round} share no regression episode")
     paired = build_report(bank=final.bank, settings=final.settings, candidate=final.candidate,
                           baseline=start.baseline, episodes=episodes)
     path = None
@@ -200,13 +202,14 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
     def failure_rate(summary: Optional[Summary]) -> Optional[Mapping[str, Any]]:
         return summary.failure_rate if summary is not None else None
 
-    return {"start": start.baseline.spec if start.baseline else None,
-            "final": final.candidate.spec if final.candidate else None,
-            "rounds": [first.round, last.round], "verdict": paired.verdict,
-            "reason": comparison.reason, "episodes": comparison.n,
-            "new_failure_rate": failure_rate(overall.candidate), "old_failure_rate": failure_rate(overall.baseline),
-            "difference": comparison.difference, "p_value": comparison.p_value,
-            "regressed": list(paired.regressed or ()), "report": str(path) if path is not None else None}
+    return FinalVsStart(start=start.baseline.spec if start.baseline is not None else None,
+                        final=final.candidate.spec if final.candidate is not None else None,
+                        rounds=(first.round, last.round), verdict=paired.verdict,
+                        reason=comparison.reason, episodes=comparison.n,
+                        new_failure_rate=failure_rate(overall.candidate),
+                        old_failure_rate=failure_rate(overall.baseline),
+                        difference=comparison.difference, p_value=comparison.p_value,
+                        regressed=tuple(paired.regressed or ()), report=str(path) if path is not None else None)
 
 
 def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = None,
@@ -225,26 +228,32 @@ def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = Non
     if "final_vs_start" not in body:
         final = final_vs_start(body, out, folder)
         if final is not None:
-            body["final_vs_start"] = final
+            body["final_vs_start"] = final.to_dict()
     return body
 
 
-def _final_line(final: Optional[Mapping[str, Any]]) -> Optional[str]:
+def _final_line(final: Optional[FinalVsStart]) -> Optional[str]:
     """One sentence on the last fine-tuned policy against the starting one (None when there is no such
     comparison)."""
-    if not final:
+    if final is None:
         return None
-    if final.get("error"):
-        return f"Fine-tuned policy against the starting policy on the starting bank: not compared ({final['error']})."
-    rounds = final.get("rounds") or ["?", "?"]
-    return (f"Round {rounds[1]}'s fine-tuned policy `{final.get('final')}` against the starting policy "
-            f"`{final.get('start')}` on the starting "
-            f"bank ({final.get('episodes')} paired episodes: round {rounds[0]}'s baseline episodes with round "
-            f"{rounds[1]}'s candidate episodes, same scenarios and seeds): **{final.get('verdict')}** - "
-            f"{final.get('reason')}; failure rate fine-tuned {_summary_rate(final.get('new_failure_rate'))}, start "
-            f"{_summary_rate(final.get('old_failure_rate'))}"
-            + (f"; regressed: {', '.join(final['regressed'])}" if final.get("regressed") else "")
-            + (f"; report `{final['report']}`" if final.get("report") else "") + ".")
+    if final.error:
+        return f"Fine-tuned policy against the starting policy on the starting bank: not compared ({final.error})."
+    rounds = final.rounds or ("?", "?")
+    return (f"Round {rounds[1]}'s fine-tuned policy `{final.final}` against the starting policy "
+            f"`{final.start}` on the starting "
+            f"bank ({final.episodes} paired episodes: round {rounds[0]}'s baseline episodes with round "
+            f"{rounds[1]}'s candidate episodes, same scenarios and seeds): **{final.verdict}** - "
+            f"{final.reason}; failure rate fine-tuned {_summary_rate(final.new_failure_rate)}, start "
+            f"{_summary_rate(final.old_failure_rate)}"
+            + (f"; regressed: {', '.join(final.regressed)}" if final.regressed else "")
+            + (f"; report `{final.report}`" if final.report else "") + ".")
+
+
+def _report_final(report: Mapping[str, Any]) -> Optional[FinalVsStart]:
+    """The report's own cross-round check (``final_vs_start``), read into its record; ``None`` without one."""
+    found = report.get("final_vs_start")
+    return None if found is None else FinalVsStart.from_dict(found)
 
 
 _ORDER = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
@@ -512,23 +521,22 @@ def _heldout_lines(after: Optional[HeldOutComparison]) -> List[str]:
         lines.append("- no control arm in this round: a drop cannot be credited to the mined scenarios")
     for key, label in (("start", "the starting policy"), ("control", "the control")):
         test = after.held_out_test(key)
-        if test:
+        if test is not None:
             lines.append(f"- fine-tuned policy against {label} on the held-out families: "
-                         f"**{'significantly worse' if test.get('worse') else 'not significantly worse'}** "
-                         f"({test.get('reason')}; {test.get('test')})")
-            harm = test.get("family_harm")
-            if harm:
-                rows = harm.get("families") or {}
+                         f"**{'significantly worse' if test.worse else 'not significantly worse'}** "
+                         f"({test.reason}; {test.test})")
+            harm = test.family_harm
+            if harm is not None:
                 lines.append(f"- held-out families against {label}, harm rule at the margin "
-                             f"{100 * harm['margin']:+.1f} pp (a family whose difference is worse blocks ACCEPTED): "
-                             + ("**harm not ruled out in " + ", ".join(harm["harmed"]) + "**; " if harm["harmed"]
+                             f"{100 * harm.margin:+.1f} pp (a family whose difference is worse blocks ACCEPTED): "
+                             + ("**harm not ruled out in " + ", ".join(harm.harmed) + "**; " if harm.harmed
                                 else "no family worse by more than the margin; ")
                              + "per family the difference (95% CI; non-inferiority at the margin, Holm over the "
                              f"families at one-sided {HELDOUT_ALPHA / 2:g}, evidence only): "
-                             + "; ".join(f"{name} {100 * row['difference']:+.1f} pp (95% CI "
-                                         f"{100 * row['interval'][0]:+.1f} to {100 * row['interval'][1]:+.1f}; "
-                                         f"{'non-inferior' if row['non_inferior'] else 'not shown'})"
-                                         for name, row in rows.items()))
+                             + "; ".join(f"{name} {100 * row.difference:+.1f} pp (95% CI "
+                                         f"{100 * row.interval[0]:+.1f} to {100 * row.interval[1]:+.1f}; "
+                                         f"{'non-inferior' if row.non_inferior else 'not shown'})"
+                                         for name, row in harm.families.items()))
     per = after.per_scenario or {}
     if per:
         controls = (versus.per_scenario if versus else None) or {}
@@ -625,7 +633,7 @@ def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
             f"| {row['round']} | {row['failures']} ({row['against']}) / {row['episodes']} | {row['clusters']} | "
             f"{row['kept']} | {row['split']} | {row['before']} | {row['control']} | {row['after']} | {row['drop']} | "
             f"{row['p']} | {row['p_control']} | {row['untouched']} | {row['verdict']} |")
-    final_line = _final_line(report.get("final_vs_start"))
+    final_line = _final_line(_report_final(report))
     if final_line:
         lines += ["", final_line]
     return lines
@@ -898,7 +906,7 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
                  row["untouched"]]
         row = "".join(f"<td>{escape(str(c))}</td>" for c in cells)
         rows.append(f"<tr>{row}<td class=\"{escape(str(verdict))}\">{escape(str(verdict))}</td></tr>")
-    final_line = _final_line(report.get("final_vs_start"))
+    final_line = _final_line(_report_final(report))
     final_html = f"<p>{escape(final_line).replace('**', '')}</p>" if final_line else ""
     head = ("<tr><th>round</th><th>failures / episodes mined</th><th>clusters</th><th>kept</th>"
             "<th>fine-tune / held-out</th><th>held-out failure rate: start</th><th>control</th><th>fine-tuned</th>"

@@ -81,7 +81,7 @@ from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.loop.heldout import episode_failed, failure_types, HeldOutStore, paired_summary
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.loop.record import (
-    ErroredEpisodes, FineTuneArm, HeldOutBefore, HeldOutComparison, LoopStart, MinedEntry, MiningSummary,
+    ErroredEpisodes, FineTuneArm, HeldOutBefore, HeldOutComparison, HeldOutTests, LoopStart, MinedEntry, MiningSummary,
     RecordedLoopSettings, ReferenceGate, RegressComparison, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
     UntouchedComparison)
 from dv2s_gym.loop.report import (errored_note, errored_text, rate_text, reference_gate_text,
@@ -102,7 +102,7 @@ from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
-from scenario_bank.records import EpisodeRecord, RecordError
+from scenario_bank.records import EpisodeRecord, HeldOutEpisode, RecordError
 from scenario_bank.run_identity import check_format, check_identity, record_format
 from policies.evaluation import EVAL_SEED_BASE
 from policies.card_record import FineTune, FineTuneMethod
@@ -404,7 +404,7 @@ def _regress_errored(report: Mapping[str, Any], roles: Mapping[str, str]) -> Dic
     report = RegressReport.from_json(report)
     found: Dict[str, Dict[str, Any]] = {}
     for role, name in roles.items():
-        found[name] = errored_episodes([{"scenario": e.scenario, "error": e.result(role).get("error")}
+        found[name] = errored_episodes([{"scenario": e.scenario, "error": e.result(role).error}
                                         for e in report.episodes or () if e.result(role) is not None])
     return found
 
@@ -802,7 +802,7 @@ miner's settings so that importing the loop does not load torch). The held-out e
 passes (:func:`reference_gate`)."""
 
 
-def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, str]) -> ReferenceGate:
+def reference_gate(records: Sequence[HeldOutEpisode], families: Mapping[str, str]) -> ReferenceGate:
     """The ``reference`` step's record from the reference driver's held-out ``records``: which held-out episodes
     the loop leaves out because the reference driver did not pass them (it failed, by the miner's monitors, or the
     episode errored, so that nobody knows), counted and named, never dropped silently.
@@ -816,7 +816,7 @@ def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, 
     excluded, failed, errored = [], 0, 0
     kept_families, all_families = set(), set()
     for record in records:
-        name, seed = str(record["scenario"]), int(record["seed"])
+        name, seed = str(record.scenario), int(record.seed)
         row = by_scenario.setdefault(name, {"episodes": 0, "excluded": 0, "failures": {}})
         row["episodes"] += 1
         family = families.get(name, name)
@@ -832,7 +832,7 @@ def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, 
             kind = "error"
         else:
             failed += 1
-            kind = str((record.get("failure") or {}).get("type") or "failure")
+            kind = str((record.failure or {}).get("type") or "failure")
         row["failures"][kind] = row["failures"].get(kind, 0) + 1
     return ReferenceGate(reference=REFERENCE_DRIVER, episodes=len(records), kept=len(records) - len(excluded),
                          excluded=tuple(excluded), failed=failed, errored=errored,
@@ -1037,8 +1037,8 @@ def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, l
                        resumed=tuple(dagger.resumed or ()))
 
 
-def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]],
-                       control: Optional[Sequence[Mapping[str, Any]]], *, min_episodes: int,
+def heldout_comparison(before: Sequence[HeldOutEpisode], after: Sequence[HeldOutEpisode],
+                       control: Optional[Sequence[HeldOutEpisode]], *, min_episodes: int,
                        seed: int = 0, families: Optional[Mapping[str, str]] = None,
                        min_families: int = 0, margin: Optional[float] = None) -> HeldOutComparison:
     """The ``after`` step (a :class:`~dv2s_gym.loop.record.HeldOutComparison`):
@@ -1055,7 +1055,7 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     (:func:`dv2s_gym.loop.verdict.heldout_worse`, the verdict's held-out tests; ``None`` when not tested:
     below the minimums, or no control), each with its held-out families' harm rule at ``margin`` (default: the
     loop's default margin; :func:`dv2s_gym.loop.verdict.family_harm`)."""
-    scenarios = sorted({str(r["scenario"]) for r in before})
+    scenarios = sorted({str(r.scenario) for r in before})
     # the drop's interval resamples families, the unit the split holds out (scenarios of one family are not
     # independent); a scenario without a family stands for itself
     summary = paired_summary(before, after, seed=seed,
@@ -1064,7 +1064,7 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     summary["heldout_scenarios"] = len(scenarios)
     # a family counts only with a tested pair (no error on either side) in each held-out test: one whose episodes
     # all errored tests nothing, so it never makes a round large enough to judge
-    def tested_families(baseline: Sequence[Mapping[str, Any]]) -> set:
+    def tested_families(baseline: Sequence[HeldOutEpisode]) -> set:
         return {family for family, table in _family_tables(baseline, after, families).items() if table.n}
 
     tested = tested_families(before)
@@ -1101,11 +1101,11 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
 
     margin = DEFAULTS["margin"] if margin is None else float(margin)
     summary["margin"] = margin
-    summary["significantly_worse"] = {
-        "start": None if shortfall else heldout_worse(_family_tables(before, after, families), "start", margin),
-        "control": None if shortfall or control_shortfall or control is None else heldout_worse(
-            _family_tables(control, after, families), "control", margin)}
-    return HeldOutComparison.from_dict(summary)
+    tests = HeldOutTests(
+        start=None if shortfall else heldout_worse(_family_tables(before, after, families), "start", margin),
+        control=None if shortfall or control_shortfall or control is None else heldout_worse(
+            _family_tables(control, after, families), "control", margin))
+    return HeldOutComparison.from_dict(summary).replace(significantly_worse=tests)
 
 
 def _control_shortfall(pairs: int, families: set, min_episodes: int, min_families: int) -> Optional[str]:
@@ -1115,18 +1115,18 @@ def _control_shortfall(pairs: int, families: set, min_episodes: int, min_familie
     return None if shortfall is None else "against the control: " + shortfall
 
 
-def _family_tables(baseline: Sequence[Mapping[str, Any]], candidate: Sequence[Mapping[str, Any]],
+def _family_tables(baseline: Sequence[HeldOutEpisode], candidate: Sequence[HeldOutEpisode],
                    families: Optional[Mapping[str, str]]) -> Dict[str, Any]:
     """``{held-out family: PairedTable}`` of ``candidate`` against ``baseline`` records, paired by (scenario, seed);
     a pair with an error on either side is left out."""
-    twins = {(r["scenario"], int(r["seed"])): r for r in candidate}
+    twins = {(r.scenario, int(r.seed)): r for r in candidate}
     outcomes: Dict[str, tuple] = {}
     for record in baseline:
-        twin = twins.get((record["scenario"], int(record["seed"])))
+        twin = twins.get((record.scenario, int(record.seed)))
         old, new = episode_failed(record), episode_failed(twin) if twin is not None else None
         if old is None or new is None:
             continue
-        family = (families or {}).get(str(record["scenario"]), str(record["scenario"]))
+        family = (families or {}).get(str(record.scenario), str(record.scenario))
         pair = outcomes.setdefault(family, ([], []))
         pair[0].append(new)
         pair[1].append(old)
