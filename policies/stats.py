@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 import numpy as np
-from scipy import stats
 
 from envs.errors import DV2SError
 from scenario_bank.records import JsonRecord
@@ -50,6 +49,8 @@ def check_count(k: int, n: int) -> Tuple[int, int]:
 
 def two_sided_z(confidence: float) -> float:
     """Normal quantile for a two-sided interval of the given confidence."""
+    from scipy import stats  # slow to import: the records of this module are read at the command line's start
+
     return float(stats.norm.ppf(0.5 + check_level(confidence, "confidence") / 2.0))
 
 
@@ -142,4 +143,6 @@ def mcnemar_p(candidate_only: int, baseline_only: int, alternative: str = "two-s
     discordant = int(candidate_only) + int(baseline_only)
     if discordant == 0:
         return 1.0
+    from scipy import stats
+
     return float(min(1.0, stats.binomtest(int(candidate_only), discordant, 0.5, alternative=alternative).pvalue))

@@ -220,8 +220,8 @@ def test_the_control_test_needs_the_minimums_and_the_floor_on_its_own_pairs():
     record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
                                                            "regress": {"verdict": "PASS", "reason": "stand-in"}}}
     judged = judge_round(record)
-    assert judged["verdict"] == "NOT ACCEPTED" and judged["decided_by"] == "heldout_vs_control"
-    assert "against the control did not run (against the control: only 4" in judged["reason"]
+    assert judged.verdict == "NOT ACCEPTED" and judged.decided_by == "heldout_vs_control"
+    assert "against the control did not run (against the control: only 4" in judged.reason
     # with minimums of zero the floor still holds for the control's pairs
     low = heldout_comparison(held(before), held(after), held(control), min_episodes=0, families=families, min_families=0)
     assert low["significantly_worse"]["start"] is not None and low["significantly_worse"]["control"] is None
@@ -1242,7 +1242,7 @@ def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_
     assert summary["significantly_worse"] == {"start": None, "control": None}
     record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
                                                             "regress": {"verdict": "PASS", "reason": "r"}}}
-    assert judge_round(record)["verdict"] == "NOT ACCEPTED"
+    assert judge_round(record).verdict == "NOT ACCEPTED"
     from dv2s_gym.loop.report import _heldout_lines
 
     assert "from 2 families (3 scenarios, 1 more with no tested pair)" in "\n".join(_heldout_lines(summary))
@@ -1250,7 +1250,7 @@ def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_
     tuned = [{**r, "error": None} for r in tuned]
     summary = heldout_comparison(held(start), held(tuned), held(control), min_episodes=20, families=families, min_families=3)
     judged = judge_round({**record, "steps": {**record["steps"], "after": summary}})
-    assert judged["verdict"] == "ACCEPTED" and "on 30 held-out pairs from 3 families)" in judged["reason"]
+    assert judged.verdict == "ACCEPTED" and "on 30 held-out pairs from 3 families)" in judged.reason
 
 
 def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_steps_test(tmp_path, monkeypatch):

@@ -534,12 +534,12 @@ def test_the_held_out_gate_has_no_margin_and_says_against_whom_and_where():
 
 
 def test_a_round_is_judged_once_it_fine_tuned_or_named_a_policy():
-    from dv2s_gym.loop.verdict import judge_round
+    from dv2s_gym.loop.verdict import Judgement, judge_round
 
     assert judge_round({"round": 1, "steps": {"mine": {}}}) is None and judge_round({"round": 1}) is None
     for record in ({"round": 1, "steps": {"fine_tune": {}}}, {"round": 1, "new_policy": "ppo:x", "steps": {}}):
-        assert judge_round(record) == {"verdict": "NOT ACCEPTED", "decided_by": "regression",
-                                       "reason": "the round has no regression test yet"}
+        assert judge_round(record) == Judgement(verdict="NOT ACCEPTED", decided_by="regression",
+                                                reason="the round has no regression test yet")
 
 
 def test_a_held_out_test_that_did_not_run_says_which_and_why():
@@ -567,18 +567,18 @@ def test_a_held_out_test_that_did_not_run_says_which_and_why():
     ]
     for after, decided_by, words in cases:
         judged = judge_round(_passed_round(after))
-        assert judged["verdict"] == "NOT ACCEPTED" and judged["decided_by"] == decided_by, after
-        assert words + ", so a harm on the held-out families is not ruled out" in judged["reason"], judged["reason"]
+        assert judged.verdict == "NOT ACCEPTED" and judged.decided_by == decided_by, after
+        assert words + ", so a harm on the held-out families is not ruled out" in judged.reason, judged.reason
     # no control arm recorded at all: the test against the start is enough
     alone = judge_round(_passed_round({"pairs": 20, "significantly_worse": {"start": tested, "control": None}}))
-    assert alone["verdict"] == "ACCEPTED" and alone["reason"].endswith("; no control arm to compare with; no held-out "
+    assert alone.verdict == "ACCEPTED" and alone.reason.endswith("; no control arm to compare with; no held-out "
                                                                      f"family worse for the fine-tuned policy by more "
                                                                      f"than the margin +2.0 pp ({FAMILY_RULE})")
     both = judge_round(_passed_round({"pairs": 20, "control": {"k": 1}, "vs_control": {},
                                       "significantly_worse": {"start": tested, "control": _held_out_test("control")}}))
-    assert both["verdict"] == "ACCEPTED" and "no control arm" not in both["reason"]
-    assert "not significantly worse than the starting policy (p = " in both["reason"]
-    assert "and not significantly worse than the control (p = 1 on 20 held-out pairs from 1 family)" in both["reason"]
+    assert both.verdict == "ACCEPTED" and "no control arm" not in both.reason
+    assert "not significantly worse than the starting policy (p = " in both.reason
+    assert "and not significantly worse than the control (p = 1 on 20 held-out pairs from 1 family)" in both.reason
 
 
 def test_the_cross_round_check_changes_only_an_accepted_verdict():

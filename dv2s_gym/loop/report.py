@@ -221,7 +221,7 @@ def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = Non
     rounds = _rounds(report)
     for index, record in enumerate(rounds):
         judged = judge_round(record)
-        if judged is not None and judged["verdict"] == ACCEPTED and not record.cross_round_checked:
+        if judged is not None and judged.verdict == ACCEPTED and not record.cross_round_checked:
             checked = final_vs_start({"rounds": rounds[:index + 1]}, folder=folder or out)
             rounds[index] = record.with_cross_round_check(checked)
     body = {**report, "rounds": [record.to_dict() for record in rounds]}

@@ -37,13 +37,13 @@ from dv2s_gym.loop.record import (FamilyHarm, FamilyHarmRow, FinalVsStart, HeldO
                                   RegressComparison, RegressSummary, RoundRecord, RoundSteps)
 from dv2s_gym.loop.settings import DEFAULTS, LoopError
 
-if TYPE_CHECKING:  # the regression statistics load scipy: imported where they are used
+if TYPE_CHECKING:  # the regression statistics load scipy, kept off the command line's start: imported where used
     from dv2s_gym.regress.stats import PairedTable
 
 __all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
            "FAMILY_RULE", "family_harm", "non_inferiority_p",
            "EVIDENCE_HINT", "EVIDENCE_FLOOR", "fewest_significant_pairs", "evidence_floor_note", "judge_round",
-           "heldout_worse", "too_small", "Recommendation", "recommendation"]
+           "heldout_worse", "too_small", "Judgement", "Recommendation", "recommendation"]
 
 ACCEPTED, REJECTED, NOT_ACCEPTED = "ACCEPTED", "REJECTED", "NOT ACCEPTED"
 EXIT_CODES = {ACCEPTED: 0, REJECTED: 1, NOT_ACCEPTED: 3}
@@ -239,13 +239,30 @@ def _control_below_floor(after: HeldOutComparison) -> Optional[str]:
     return str(versus.underpowered) if versus is not None and versus.underpowered else None
 
 
-def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
-    """``{"verdict", "reason", "decided_by"}`` on round ``record``'s fine-tuned policy (module docstring; a
-    :class:`~dv2s_gym.loop.record.RoundRecord`, its JSON object read with ``RoundRecord.from_dict``);
-    ``None`` when the round fine-tuned none. ``decided_by`` names the test that decided (``regression``,
-    ``heldout_vs_control``, ``heldout_vs_start``, ``all`` when every test agreed on ACCEPTED), or the missing
-    one."""
-    record = RoundRecord.from_dict(record)
+@dataclasses.dataclass(frozen=True)
+class Judgement:
+    """The verdict on one round's fine-tuned policy (:func:`judge_round`)."""
+
+    verdict: str
+    """ACCEPTED, REJECTED or NOT ACCEPTED."""
+    decided_by: str
+    """The test that decided (``regression``, ``heldout_vs_control``, ``heldout_vs_start``,
+    ``heldout_families_vs_start`` / ``_vs_control``, ``untouched``, ``final_vs_start``, ``all`` when every test
+    agreed on ACCEPTED), or the missing one."""
+    reason: str
+    """Why, in words."""
+
+
+def judge_round(record: RoundRecord) -> Optional[Judgement]:
+    """The verdict on round ``record``'s fine-tuned policy (module docstring; a
+    :class:`~dv2s_gym.loop.record.RoundRecord`, its JSON object read with ``RoundRecord.from_dict``), a
+    :class:`Judgement`; ``None`` when the round fine-tuned none."""
+    found = _judged(RoundRecord.from_dict(record))
+    return None if found is None else Judgement(**found)
+
+
+def _judged(record: RoundRecord) -> Optional[Dict[str, str]]:
+    """:func:`judge_round`'s verdict, reason and deciding test as keyword arguments of :class:`Judgement`."""
     steps = record.steps
     if not record.fine_tuned:
         return None
@@ -320,28 +337,28 @@ def _untouched_fail(steps: RoundSteps) -> Optional[str]:
             f"starting policy ({versus.reason}), so it harms scenes the loop did not touch")
 
 
-def _with_cross_round_check(judged: Dict[str, str], final: Optional[FinalVsStart]) -> Dict[str, str]:
+def _with_cross_round_check(judged: Judgement, final: Optional[FinalVsStart]) -> Judgement:
     """``judged`` (an ACCEPTED round's verdict) after the cross-round check on its policy (``final_vs_start`` over
     the rounds up to it): REJECTED when that check FAILed, NOT ACCEPTED when it could not run (an error):
     a check that cannot run never counts as passed."""
-    if judged["verdict"] != ACCEPTED or final is None:
+    if judged.verdict != ACCEPTED or final is None:
         return judged
     rounds = ", ".join(map(str, final.rounds or ()))
     if final.error:
-        return {"verdict": NOT_ACCEPTED, "decided_by": "final_vs_start",
-                "reason": f"the regression test of the fine-tuned against the starting policy on the starting bank, "
-                          f"over the rounds so far, could not run ({final.error}), so a regression against the "
-                          f"starting policy is not ruled out"}
+        return Judgement(verdict=NOT_ACCEPTED, decided_by="final_vs_start",
+                         reason=f"the regression test of the fine-tuned against the starting policy on the starting "
+                                f"bank, over the rounds so far, could not run ({final.error}), so a regression "
+                                f"against the starting policy is not ruled out")
     if final.verdict == "FAIL":  # each round passed against its own start
-        return {"verdict": REJECTED, "decided_by": "final_vs_start",
-                "reason": f"over rounds {rounds} the fine-tuned policy regressed against the starting one on the "
-                          f"starting bank: the regression test of the fine-tuned against the starting policy FAILed "
-                          f"({final.reason})"}
+        return Judgement(verdict=REJECTED, decided_by="final_vs_start",
+                         reason=f"over rounds {rounds} the fine-tuned policy regressed against the starting one on "
+                                f"the starting bank: the regression test of the fine-tuned against the starting "
+                                f"policy FAILed ({final.reason})")
     if final.verdict == "INCONCLUSIVE":
-        return {**judged, "reason": f"{judged['reason']}; but over rounds {rounds} the regression test of the "
-                                    f"fine-tuned against the starting policy on the starting bank was INCONCLUSIVE "
-                                    f"({final.reason}): no regression against the starting policy over the "
-                                    "rounds is shown, nor ruled out"}
+        return dataclasses.replace(judged, reason=f"{judged.reason}; but over rounds {rounds} the regression test of "
+                                                  f"the fine-tuned against the starting policy on the starting bank "
+                                                  f"was INCONCLUSIVE ({final.reason}): no regression against the "
+                                                  "starting policy over the rounds is shown, nor ruled out")
     return judged
 
 
@@ -416,22 +433,22 @@ def recommendation(report: Mapping[str, Any]) -> Recommendation:
                  else record.final_vs_start)
         judged = _with_cross_round_check(judged, final)
         judged_rounds[index] = (record, judged)
-        if judged["verdict"] == ACCEPTED:
+        if judged.verdict == ACCEPTED:
             recommended = record.new_policy or report.get("policy")
-        elif judged.get("decided_by") == "final_vs_start" and judged["verdict"] == REJECTED:
+        elif judged.decided_by == "final_vs_start" and judged.verdict == REJECTED:
             recommended = start  # the lineage regressed against the starting policy: back to it
     record, judged = judged_rounds[-1]
     candidate = record.new_policy or report.get("policy")
     number = record.round
-    if judged["verdict"] == ACCEPTED:
-        sentence = f"ACCEPTED: use the round {number} fine-tuned policy {candidate}: {judged['reason']}"
+    if judged.verdict == ACCEPTED:
+        sentence = f"ACCEPTED: use the round {number} fine-tuned policy {candidate}: {judged.reason}"
     else:
         keep = "the starting policy" if recommended == start else "the last accepted policy"
-        sentence = (f"{judged['verdict']}: keep {keep} {recommended}, not the round {number} fine-tuned policy "
-                    f"{candidate}: {judged['reason']}")
-    small = too_small(record) if judged["verdict"] == NOT_ACCEPTED else None
+        sentence = (f"{judged.verdict}: keep {keep} {recommended}, not the round {number} fine-tuned policy "
+                    f"{candidate}: {judged.reason}")
+    small = too_small(record) if judged.verdict == NOT_ACCEPTED else None
     if small:
         sentence += f". TOO SMALL TO JUDGE ({small}): {EVIDENCE_HINT}"
-    return Recommendation(policy=recommended, verdict=judged["verdict"], round=number, candidate=candidate,
-                          reason=judged["reason"], decided_by=judged.get("decided_by"),
-                          exit_code=EXIT_CODES[judged["verdict"]], too_small=small, sentence=sentence)
+    return Recommendation(policy=recommended, verdict=judged.verdict, round=number, candidate=candidate,
+                          reason=judged.reason, decided_by=judged.decided_by,
+                          exit_code=EXIT_CODES[judged.verdict], too_small=small, sentence=sentence)
