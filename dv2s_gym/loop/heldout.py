@@ -96,8 +96,9 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
                 if bar is not None:
                     bar.update(1)
         elif tasks:
-            def finished(record: Dict[str, Any]) -> None:  # a worker's HeldOutEpisode, as JSON
-                store.append(HeldOutEpisode.from_dict({"policy": policy, **record}))
+            def finished(record: Any) -> None:  # a worker's HeldOutEpisode, or the JSON object of one it gave up on
+                store.append(record if isinstance(record, HeldOutEpisode)
+                             else HeldOutEpisode.from_dict({"policy": policy, **record}))
                 if bar is not None:
                     bar.update(1)
 
@@ -106,9 +107,10 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
     finally:
         if bar is not None:
             bar.close()
-    return [store.get(role, scenario, seed)
-            or HeldOutEpisode(role=role, scenario=scenario, seed=int(seed), policy=policy, error="did not run")
-            for scenario, seed in episodes]
+    found = [(scenario, seed, store.get(role, scenario, seed)) for scenario, seed in episodes]
+    return [record if record is not None
+            else HeldOutEpisode(role=role, scenario=scenario, seed=int(seed), policy=policy, error="did not run")
+            for scenario, seed, record in found]
 
 
 def _relative_drop(before: float, after: float) -> Optional[float]:

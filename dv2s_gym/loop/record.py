@@ -31,11 +31,17 @@ __all__ = ["ErroredEpisodes", "LoopStart", "RecordedLoopSettings", "PairedTable"
            "FamilyHarmRow", "FamilyHarm", "HeldOutWorse", "HeldOutTests", "FinalVsStart",
            "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
            "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
-           "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS"]
+           "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS", "recorded"]
 
 STEPS = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 """The steps of a round, in the order they run (a round that kept no mined scenario has ``skipped`` after
 ``split`` instead of the rest)."""
+
+
+def recorded(record: Optional[JsonRecord]) -> bool:
+    """Whether ``record`` (a step's record or a part of one) holds anything: ``None`` and a record whose JSON object
+    is empty (a step recorded as ``{}``) hold nothing."""
+    return record is not None and bool(record.to_dict())
 
 
 @dataclass(frozen=True, eq=False)

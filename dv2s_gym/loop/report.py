@@ -102,7 +102,7 @@ from dv2s_gym.mining.conversion.files import CONVERSION_DIR, ENTRY_CONVERTED_VID
 from dv2s_gym.loop.errored import merged_messages, messages_text
 from dv2s_gym.loop.record import (
     ControlTable, ErroredEpisodes, FinalVsStart, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, ReferenceGate, RegressSummary,
-    RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
+    RoundRecord, RoundSteps, SplitRecord, UntouchedComparison, recorded)
 from dv2s_gym.mining.report_text import by_type_text, clip_caption
 from dv2s_gym.loop.verdict import (ACCEPTED, HELDOUT_ALPHA, Recommendation, evidence_floor_note,
                                          judge_round, recommendation)
@@ -178,7 +178,8 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
         final = load_report(_regress_report_path(last.steps.regress.report, folder))
     except Exception as error:  # noqa: BLE001 - a missing or foreign report is a line of the loop report
         return FinalVsStart.failed(f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}")
-    start_bank, final_bank = start.bank or BankInfo(), final.bank or BankInfo()
+    start_bank = start.bank if start.bank is not None else BankInfo()
+    final_bank = final.bank if final.bank is not None else BankInfo()
     names = list(start_bank.scenarios or ())
     hashes = [start_bank.hashes or {}, final_bank.hashes or {}]
     changed = [n for n in names if hashes[0].get(n) != hashes[1].get(n)]
@@ -197,7 +198,7 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
     if out is not None:
         path = write_json(paired, Path(out) / FINAL_VS_START_DIR / "report.json")
     overall = paired.overall
-    comparison = overall.comparison or PairedComparison()
+    comparison = overall.comparison if overall.comparison is not None else PairedComparison()
 
     def failure_rate(summary: Optional[Summary]) -> Optional[Mapping[str, Any]]:
         return summary.failure_rate if summary is not None else None
@@ -272,9 +273,9 @@ def _rounds(report: Mapping[str, Any]) -> List[RoundRecord]:
 def _round_row(record: RoundRecord) -> Dict[str, Any]:
     """The cells of a round's line in the summary tables (Markdown and HTML)."""
     steps = record.steps
-    mine, split = steps.mine, steps.split or SplitRecord()
-    regress = steps.regress or RegressSummary()
-    after = steps.after or HeldOutComparison()
+    mine, split = steps.mine, steps.split if steps.split is not None else SplitRecord()
+    regress = steps.regress if steps.regress is not None else RegressSummary()
+    after = steps.after if steps.after is not None else HeldOutComparison()
     drop = after.relative_drop
     interval = after.relative_drop_interval or [None, None]
     drop_text = "-" if drop is None else f"{drop:.0%}" + (
@@ -289,7 +290,7 @@ def _round_row(record: RoundRecord) -> Dict[str, Any]:
     p_value = after.mcnemar_p
     p_control = None if after.vs_control is None else after.vs_control.mcnemar_p
     return {
-        "control": rate_text(after.control) if after.control else "-",
+        "control": rate_text(after.control) if recorded(after.control) else "-",
         "p_control": "-" if p_control is None else f"{p_control:.3g}",
         "untouched": _untouched_cell(steps.untouched),
         "round": record.round, "failures": _recorded(mine, "failures"),
@@ -318,7 +319,7 @@ def errored_text(errored: Mapping[str, Optional[ErroredEpisodes]]) -> str:
     labels = {"start": "starting policy ", "fine_tuned": "fine-tuned policy ", "control": "control ", "mine": ""}
     parts = []
     for role, found in errored.items():
-        if found and found.episodes:
+        if found is not None and found.episodes:
             names = ", ".join(f"{name} {count}" for name, count in (found.scenarios or {}).items())
             parts.append(f"{labels.get(role, role + ' ')}{found.episodes}" + (f" ({names})" if names else ""))
     return ", ".join(parts)
@@ -355,7 +356,8 @@ def errored_by_stage(record: RoundRecord) -> List[tuple]:
 
 
 def _errored_total(record: RoundRecord) -> int:
-    return sum(int(found.episodes or 0) for _, by in errored_by_stage(record) for found in by.values() if found)
+    return sum(int(found.episodes or 0) for _, by in errored_by_stage(record) for found in by.values()
+               if found is not None)
 
 
 def _errored_lines(record: RoundRecord) -> List[str]:
@@ -370,7 +372,7 @@ def _errored_lines(record: RoundRecord) -> List[str]:
     lines = [f"- errored episodes (counted in no rate or test): " + ("**" if total else "") + "; ".join(parts)
              + ("**" if total else "")]
 
-    merged = merged_messages([found for _, by in stages for found in by.values() if found])
+    merged = merged_messages([found for _, by in stages for found in by.values() if recorded(found)])
     lines += [f"  - `{name}`: {messages_text(merged, name)}" for name in merged]
     return lines
 
@@ -406,7 +408,7 @@ def _share(summary: Optional[Mapping[str, Any]], key: str) -> str:
 
 def _untouched_cell(untouched: Optional[UntouchedComparison]) -> str:
     """Failure rates start / control / fine-tuned on the untouched set, one cell."""
-    if not untouched:
+    if not recorded(untouched):
         return "-"
     policies = untouched.policies or {}
     return " / ".join(_share(policies.get(role), "failure_rate") for role in ("start", "control", "fine_tuned"))
@@ -414,7 +416,7 @@ def _untouched_cell(untouched: Optional[UntouchedComparison]) -> str:
 
 def _untouched_lines(untouched: Optional[UntouchedComparison]) -> List[str]:
     """The untouched set's table (Markdown) and its two comparisons."""
-    if not untouched:
+    if not recorded(untouched):
         return []
     policies = untouched.policies or {}
     lines = [f"- untouched scenario set ({len(untouched.scenarios or ())} scripts written by others for "
@@ -436,7 +438,7 @@ def _untouched_lines(untouched: Optional[UntouchedComparison]) -> List[str]:
         lines.append(f"- **WARNING: {vacuous}**")
     for comparison, label in ((untouched.fine_tuned_vs_start, "fine-tuned against start"),
                               (untouched.control_vs_fine_tuned, "control against fine-tuned")):
-        if comparison:
+        if recorded(comparison):
             lines.append(f"- untouched, {label}: **{comparison.verdict}** - {comparison.reason}; "
                          f"report `{comparison.report}`")
     return lines
@@ -475,7 +477,7 @@ def reference_gate_text(gate: ReferenceGate) -> str:
 def _reference_lines(gate: Optional[ReferenceGate]) -> List[str]:
     """The reference driver's pass over the held-out episodes: how many it did not pass, left out of every rate
     and test (loop.reference_gate)."""
-    if not gate:
+    if not recorded(gate):
         return []
     text = reference_gate_text(gate)
     return [f"- held-out episodes the reference driver does not pass: " + (f"**{text}**" if gate.excluded
@@ -484,17 +486,17 @@ def _reference_lines(gate: Optional[ReferenceGate]) -> List[str]:
 
 def _heldout_lines(after: Optional[HeldOutComparison]) -> List[str]:
     """The held-out comparison: start, control, fine-tuned, and what is (not) reported."""
-    if not after:
+    if not recorded(after):
         return []
     lines = []
     if after.underpowered:
         lines.append(f"- **WARNING: {after.underpowered}**")
     if not after.pairs:
         return lines + [f"- held-out episodes: none ran ({0 if after.errors is None else after.errors} with errors)"]
-    table = after.table or PairedTable()
+    table = after.table if after.table is not None else PairedTable()
     lines.append(f"- held-out episodes: {after.pairs} pairs{_sources_text(after)} ({after.errors} with "
                  f"errors left out); start {rate_text(after.before)}"
-                 + (f", control {rate_text(after.control)}" if after.control else "")
+                 + (f", control {rate_text(after.control)}" if recorded(after.control) else "")
                  + f", fine-tuned {rate_text(after.after)}; paired fine-tuned vs start: both failed "
                  f"{table.both_fail}, only start {table.before_only}, only fine-tuned "
                  f"{table.after_only}, neither {table.neither}"
@@ -503,14 +505,14 @@ def _heldout_lines(after: Optional[HeldOutComparison]) -> List[str]:
     if dependence:
         lines.append(dependence)
     kinds = after.failure_types
-    if kinds:
+    if recorded(kinds):
         lines.append("- held-out failures by type: " + "; ".join(
             f"{label} {by_type_text(getattr(kinds, role))}"
             for role, label in (("start", "start"), ("control", "control"), ("fine_tuned", "fine-tuned"))
             if getattr(kinds, role) is not None))
     versus = after.vs_control
-    if versus:
-        table = versus.table or ControlTable()
+    if recorded(versus):
+        table = versus.table if versus.table is not None else ControlTable()
         lines.append(f"- paired fine-tuned vs control: both failed {table.both_fail}, only control "
                      f"{table.control_only}, only fine-tuned {table.fine_tuned_only}, neither "
                      f"{table.neither}"
@@ -539,7 +541,7 @@ def _heldout_lines(after: Optional[HeldOutComparison]) -> List[str]:
                                          for name, row in harm.families.items()))
     per = after.per_scenario or {}
     if per:
-        controls = (versus.per_scenario if versus else None) or {}
+        controls = (versus.per_scenario if versus is not None else None) or {}
         lines += ["", "| held-out scenario | episodes | failed: start | control | fine-tuned |", "|---|---|---|---|---|"]
         lines += [f"| {name} | {row['n']} | {row['before']} | {controls.get(name, '-')} | {row['after']} |"
                   for name, row in per.items()]
@@ -642,7 +644,7 @@ def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
 def _mining_lines(mine: Optional[MiningSummary], settings: Mapping[str, Any]) -> List[str]:
     """A round's mining step: what was found, converted and kept, and every reason a conversion was rejected (a
     JSON object of one is read as a :class:`~dv2s_gym.loop.record.MiningSummary`)."""
-    if not mine:
+    if not recorded(mine):
         return []
     mine = MiningSummary.from_dict(mine)
     lines = [f"- mining ({mine.folder}): {mine.episodes} episodes, {mine.failures} "
@@ -677,7 +679,7 @@ def _mining_lines(mine: Optional[MiningSummary], settings: Mapping[str, Any]) ->
 
 def _split_lines(split: Optional[SplitRecord]) -> List[str]:
     """A round's split of the mined scenarios into fine-tuning and held-out families."""
-    if not split:
+    if not recorded(split):
         return []
     return [f"- split by family ({split.groups} family groups): fine-tune families "
             f"{', '.join(split.fine_tune_family_names) or 'none'} "
@@ -690,7 +692,7 @@ def _fine_tuning_lines(steps: RoundSteps) -> List[str]:
     """A round's fine-tuning (by PPO or DAgger) and its control arm, one line each."""
     lines = []
     for key, tuned in (("fine_tune", steps.fine_tune), ("control", steps.control)):
-        if not tuned:
+        if not recorded(tuned):
             continue
         if key == "control":
             lines.append(f"- control arm: the same fine-tuning ({tuned.method}, {tuned.steps} "
@@ -718,7 +720,7 @@ def _fine_tuning_lines(steps: RoundSteps) -> List[str]:
 
 def _regression_lines(regress: Optional[RegressSummary]) -> List[str]:
     """A round's regression test on the starting bank, and the held-out families' parents in it."""
-    if not regress:
+    if not recorded(regress):
         return []
     lines = [f"- regression test on the starting bank ({regress.episodes} paired episodes): "
              f"**{regress.verdict}** - {regress.reason}; failure rate new "
@@ -877,7 +879,7 @@ def _rates_svg(title: str, bars: List[tuple]) -> str:
 def _round_figures(record: RoundRecord) -> str:
     """The round's failure rates as charts: held-out (start, control, fine-tuned) and untouched."""
     steps = record.steps
-    after = steps.after or HeldOutComparison()
+    after = steps.after if steps.after is not None else HeldOutComparison()
     held = [(label, rate.rate, rate.low, rate.high) if rate is not None else (label, None, None, None)
             for label, rate in (("start", after.before), ("control", after.control), ("fine-tuned", after.after))]
     policies = (steps.untouched.policies if steps.untouched is not None else None) or {}
@@ -958,9 +960,9 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
     bank = Path(settings.get("bank_dir") or Path(out) / "bank")
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
     for record in _rounds(report):
-        mine = record.steps.mine or MiningSummary()
+        mine = record.steps.mine if record.steps.mine is not None else MiningSummary()
         policy = record.policy or report.get("policy")
-        split = record.steps.split or SplitRecord()
+        split = record.steps.split if record.steps.split is not None else SplitRecord()
         held = set(split.held_out_scenarios)
         clips: Dict[str, List[Dict[str, str]]] = {}
         for entry in mine.kept_entries:

@@ -34,7 +34,7 @@ import dataclasses
 from typing import TYPE_CHECKING, Any, Dict, Mapping, Optional, Union
 
 from dv2s_gym.loop.record import (FamilyHarm, FamilyHarmRow, FinalVsStart, HeldOutComparison, HeldOutWorse,
-                                  RegressComparison, RegressSummary, RoundRecord, RoundSteps)
+                                  RegressComparison, RegressSummary, RoundRecord, RoundSteps, recorded)
 from dv2s_gym.loop.settings import DEFAULTS, LoopError
 
 if TYPE_CHECKING:  # the regression statistics load scipy, kept off the command line's start: imported where used
@@ -103,12 +103,12 @@ def too_small(record: RoundRecord) -> Optional[str]:
     or families for a drop or a test, or a regression test that could not tell."""
     steps = RoundRecord.from_dict(record).steps
     reasons = []
-    after = steps.after or HeldOutComparison()
+    after = steps.after if steps.after is not None else HeldOutComparison()
     if after.underpowered:
         reasons.append("too few held-out episodes or families for a drop or a test")
     elif _control_below_floor(after):
         reasons.append("too few held-out episodes or families for the test against the control")
-    regress = steps.regress or RegressSummary()
+    regress = steps.regress if steps.regress is not None else RegressSummary()
     if regress.verdict == "INCONCLUSIVE":
         reasons.append(f"the regression test on {regress.episodes} paired episodes could not tell")
     return "; ".join(reasons) or None
@@ -266,10 +266,10 @@ def _judged(record: RoundRecord) -> Optional[Dict[str, str]]:
     steps = record.steps
     if not record.fine_tuned:
         return None
-    recorded = bool(steps.regress)  # a regression step with something recorded
-    regress = steps.regress or RegressSummary()
+    tested = recorded(steps.regress)  # a regression step with something recorded
+    regress = steps.regress if steps.regress is not None else RegressSummary()
     verdict = regress.verdict
-    after = steps.after or HeldOutComparison()
+    after = steps.after if steps.after is not None else HeldOutComparison()
     tests = _heldout_tests(after)
     regression = "the regression test on the rest of the bank (paired non-inferiority against the round's start)"
     if verdict == "FAIL":
@@ -283,13 +283,13 @@ def _judged(record: RoundRecord) -> Optional[Dict[str, str]]:
             return {"verdict": REJECTED, "decided_by": f"heldout_vs_{key}",
                     "reason": f"the fine-tuned policy is significantly worse than {label} on the held-out families "
                               f"({test.test}: {test.reason})"}
-    if not recorded:
+    if not tested:
         return {"verdict": NOT_ACCEPTED, "decided_by": "regression", "reason": "the round has no regression test yet"}
     if verdict != "PASS":
         return {"verdict": NOT_ACCEPTED, "decided_by": "regression",
                 "reason": f"{regression} is {verdict}, so no regression is ruled out ({regress.reason})"}
     missing = [key for key in ("start", "control") if tests.get(key) is None
-               and (key == "start" or after.control or after.vs_control is not None)]
+               and (key == "start" or recorded(after.control) or after.vs_control is not None)]
     if missing:
         why = (after.underpowered or (_control_below_floor(after) if missing == ["control"] else None)
                or ("no held-out pair ran" if not after.pairs else "not recorded"))
@@ -301,7 +301,7 @@ def _judged(record: RoundRecord) -> Optional[Dict[str, str]]:
         test = tests.get(key)
         if test is None:
             continue
-        harm = test.family_harm or FamilyHarm()
+        harm = test.family_harm if test.family_harm is not None else FamilyHarm()
         if harm.harmed:
             return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_families_vs_{key}",
                     "reason": f"{regression} PASSed and the fine-tuned policy is not significantly worse than "
@@ -330,7 +330,8 @@ def _judged(record: RoundRecord) -> Optional[Dict[str, str]]:
 def _untouched_fail(steps: RoundSteps) -> Optional[str]:
     """Why the untouched scenario set blocks ACCEPTED (the fine-tuned policy FAILed against the start there:
     significantly worse), or ``None``."""
-    versus = (steps.untouched.fine_tuned_vs_start if steps.untouched is not None else None) or RegressComparison()
+    versus = steps.untouched.fine_tuned_vs_start if steps.untouched is not None else None
+    versus = versus if versus is not None else RegressComparison()
     if versus.verdict != "FAIL":
         return None
     return (f"on the untouched scenario set (never mined or fine-tuned on) the fine-tuned policy FAILed against the "
