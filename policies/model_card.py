@@ -37,7 +37,7 @@ from tqdm import tqdm
 from envs.errors import DV2SError
 from policies.card_record import ModelCard
 from policies.evaluation import EpisodeResult, evaluate
-from policies.stats import mcnemar_p, wilson_interval
+from policies.stats import Rate, mcnemar_p
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.catalog import open_bank
 from scenario_bank.records import RecordError
@@ -92,10 +92,21 @@ def bank_version(names: Sequence[str], bank_dir: Optional[Union[str, os.PathLike
 
 
 # --------------------------------------------------------------------------- rates
-def rate(k: int, n: int, confidence: float = 0.95) -> Dict[str, Any]:
-    """``{"k", "n", "rate", "lo", "hi"}``: ``k`` events in ``n`` episodes with a Wilson interval."""
-    lo, hi = wilson_interval(int(k), int(n), confidence)
-    return {"k": int(k), "n": int(n), "rate": (k / n) if n else 0.0, "lo": float(lo), "hi": float(hi)}
+def rate(k: int, n: int, confidence: float = 0.95) -> Rate:
+    """``k`` events in ``n`` episodes with a Wilson interval (:meth:`policies.stats.Rate.of`); a card's rate without
+    an episode is 0.0. The card writes it as ``{"k", "n", "rate", "lo", "hi"}``."""
+    found = Rate.of(k, n, confidence)
+    return found if n else found.replace(rate=0.0)
+
+
+def _card_json(found: Rate) -> Dict[str, Any]:
+    """A rate as the card's JSON object names it: ``{"k", "n", "rate", "lo", "hi"}``."""
+    return {"k": found.k, "n": found.n, "rate": found.rate, "lo": found.low, "hi": found.high}
+
+
+def _card_rate(data: Mapping[str, Any]) -> Rate:
+    """The rate of a card's JSON object (:func:`_card_json`)."""
+    return Rate(k=data["k"], n=data["n"], rate=data["rate"], low=data["lo"], high=data["hi"])
 
 
 def outcome_code(result: EpisodeResult) -> str:
@@ -116,7 +127,8 @@ def _events(code: str) -> Dict[str, bool]:
 
 def _rates_of(codes: str, confidence: float) -> Dict[str, Any]:
     valid = [c for c in codes if c != "E"]
-    return {measure: rate(sum(_events(c)[measure] for c in valid), len(valid), confidence) for measure in MEASURES}
+    return {measure: _card_json(rate(sum(_events(c)[measure] for c in valid), len(valid), confidence))
+            for measure in MEASURES}
 
 
 def summarize_results(results: Sequence[EpisodeResult], confidence: float = 0.95) -> Dict[str, Any]:
@@ -209,7 +221,7 @@ def evaluation_section(results: Mapping[str, Sequence[EpisodeResult]], episodes:
 
 
 def _fmt(r: Mapping[str, Any]) -> str:
-    return f"{r['rate']:.3f} [{r['lo']:.3f}, {r['hi']:.3f}]"
+    return _card_rate(r).text(3, counts=False)
 
 
 def summary_sentences(section: Mapping[str, Any]) -> List[str]:
@@ -293,7 +305,7 @@ def read_card(location: Union[str, os.PathLike]) -> ModelCard:
 
 
 def _rate_cell(r: Mapping[str, Any]) -> str:
-    return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]"
+    return _card_rate(r).text(2)
 
 
 def render_markdown(card: ModelCard) -> str:

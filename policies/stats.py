@@ -10,15 +10,16 @@ needs them, once.
 from __future__ import annotations
 
 import operator
-from typing import Tuple
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 import numpy as np
-from scipy import stats
 
 from envs.errors import DV2SError
+from scenario_bank.records import JsonRecord
 
 __all__ = ["StatisticsError", "ALTERNATIVES", "check_level", "check_count", "two_sided_z", "wilson_bounds",
-           "wilson_interval", "mcnemar_p"]
+           "wilson_interval", "mcnemar_p", "Rate"]
 
 ALTERNATIVES = ("two-sided", "greater", "less")
 """The alternatives of :func:`mcnemar_p`."""
@@ -48,6 +49,8 @@ def check_count(k: int, n: int) -> Tuple[int, int]:
 
 def two_sided_z(confidence: float) -> float:
     """Normal quantile for a two-sided interval of the given confidence."""
+    from scipy import stats  # slow to import: the records of this module are read at the command line's start
+
     return float(stats.norm.ppf(0.5 + check_level(confidence, "confidence") / 2.0))
 
 
@@ -83,6 +86,43 @@ def wilson_interval(k: int, n: int, confidence: float = 0.95) -> Tuple[float, fl
     return float(low), float(high)
 
 
+@dataclass(frozen=True, eq=False)
+class Rate(JsonRecord):
+    """A rate of events: ``k`` of ``n`` episodes, the ``rate`` (``None`` without an episode) and its Wilson
+    interval ``low``..``high`` (:meth:`of`). Its JSON object is ``{"k", "n", "rate", "low", "high"}``, every key
+    written (``null`` when ``None``); a file that names the bounds otherwise writes its own object from the
+    fields."""
+
+    k: Optional[int] = None
+    n: Optional[int] = None
+    rate: Optional[float] = None
+    low: Optional[float] = None
+    high: Optional[float] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"k": "int", "n": "int", "rate": "number", "low": "number", "high": "number"}
+    _WHAT: ClassVar[str] = "rate"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+    @classmethod
+    def of(cls, k: int, n: int, confidence: float = 0.95) -> "Rate":
+        """``k`` events in ``n`` episodes with the two-sided Wilson interval at ``confidence``
+        (:func:`wilson_interval`; ``rate`` ``None`` when ``n`` is 0)."""
+        low, high = wilson_interval(int(k), int(n), confidence)
+        return cls(k=int(k), n=int(n), rate=(k / n) if n else None, low=low, high=high)
+
+    def text(self, digits: int = 2, counts: bool = True) -> str:
+        """The rate as ``k/n = rate [low, high]`` (without ``counts``: ``rate [low, high]``), ``digits`` decimals;
+        ``-`` without a rate."""
+        if self.rate is None:
+            return "-"
+        shown = f"{self.rate:.{digits}f} [{self.low:.{digits}f}, {self.high:.{digits}f}]"
+        return f"{self.k}/{self.n} = {shown}" if counts else shown
+
+
 def mcnemar_p(candidate_only: int, baseline_only: int, alternative: str = "two-sided") -> float:
     """Exact McNemar p-value of paired outcomes: a binomial test of the discordant pairs.
 
@@ -103,4 +143,6 @@ def mcnemar_p(candidate_only: int, baseline_only: int, alternative: str = "two-s
     discordant = int(candidate_only) + int(baseline_only)
     if discordant == 0:
         return 1.0
+    from scipy import stats
+
     return float(min(1.0, stats.binomtest(int(candidate_only), discordant, 0.5, alternative=alternative).pvalue))

@@ -16,6 +16,7 @@ from dv2s_gym.loop import run as loop_module
 from dv2s_gym.mining import miner as miner_module
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
+from scenario_bank.records import HeldOutEpisode
 
 
 def written_report(body: Dict[str, Any]) -> Dict[str, Any]:
@@ -99,3 +100,12 @@ def run_loop(policy: str = "dv2s-ppo", *, miner: Any = None, out: Any = loop_mod
         return loop_module.run_loop(policy, loop_settings, **options)
     with mock.patch.object(miner_module, "mine", miner):
         return loop_module.run_loop(policy, loop_settings, **options)
+
+
+def held(rows: Any) -> Any:
+    """Held-out rows (``{"scenario", "seed", "failed", "error"...}``) as the held-out store's records
+    (:class:`~scenario_bank.records.HeldOutEpisode`, role ``before`` unless a row names one); ``None`` stays
+    ``None``."""
+    if rows is None:
+        return None
+    return [HeldOutEpisode.from_dict({"role": "before", **row}) for row in rows]

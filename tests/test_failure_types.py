@@ -19,6 +19,7 @@ from dv2s_gym.regress import report as regress_report
 from envs.safety_metrics import MonitorSettings
 from envs.trace import EpisodeTrace
 from policies.evaluation import EpisodeResult
+from scenario_bank.records import RegressEpisode
 from scenario_bank.failure_types import (FAILURE_TABLE, FAILURE_TYPES, FailureType, failure_table, failure_type,
                                          register_failure_type, severity_order, unregister_failure_type)
 from tests.test_mining_report import make_run
@@ -203,7 +204,7 @@ def test_regress_counts_a_registered_failure_type(toy_type, monkeypatch):
     assert braked["failed"] and braked["failure_kinds"] == [TOY] and not gentle["failed"]
     not_chosen = _regress_task(monkeypatch, [10.0, 10.0, 4.0, 4.0], ["collision"])
     assert not_chosen["hard_braked"] is True and not not_chosen["failed"]  # recorded, counted only when chosen
-    summary = regress_report.summarize([braked, gentle, gentle, gentle])
+    summary = regress_report.summarize([RegressEpisode.from_dict(r) for r in (braked, gentle, gentle, gentle)])
     assert summary["hard_brake_rate"]["count"] == 1 and summary["failure_rate"]["count"] == 1
     assert [key for key, _ in regress_report.rates()][:4] == [
         "collision_rate", "off_road_rate", "stall_rate", "hard_brake_rate"]

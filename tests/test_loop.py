@@ -12,15 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from scenario_bank.records import HeldOutEpisode
 from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.loop.heldout import HeldOutStore, evaluate_heldout, paired_summary
 from dv2s_gym.loop import run as loop_module
 from dv2s_gym.loop.run import LoopError, fine_tune_weights
-from dv2s_gym.loop.record import HeldOutComparison, RoundRecord
+from dv2s_gym.loop.record import FinalVsStart, HeldOutComparison, RoundRecord
 from dv2s_gym.loop.split import family_of, split_by_family
 from dv2s_gym.workers.settings import WorkerSettings
 from cli_helpers import one_line_error, run
-from loop_helpers import FakeMiner, run_loop, written_report
+from loop_helpers import FakeMiner, held, run_loop, written_report
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
 from policies.training import EVAL_SEED_BASE, TrainingError
@@ -100,11 +101,11 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
 
     start, tuned = records([True] * 36 + [False] * 4), records([True] * 8 + [False] * 32)
     two = {"s0": "fam_x", "s1": "fam_x", "s2": "fam_x", "s3": "fam_y"}
-    few = heldout_comparison(start, tuned, None, min_episodes=20, families=two, min_families=3)
+    few = heldout_comparison(held(start), held(tuned), None, min_episodes=20, families=two, min_families=3)
     assert few["pairs"] == 40 and few["heldout_families"] == 2 and few["heldout_scenarios"] == 4
     assert "only 2 held-out families" in few["underpowered"] and "fewer than the 3 needed" in few["underpowered"]
     assert few["relative_drop"] is None and few["mcnemar_p"] is None and few["after"]["k"] == 8
-    three = heldout_comparison(start, tuned, None, min_episodes=20, families={**two, "s2": "fam_z"}, min_families=3)
+    three = heldout_comparison(held(start), held(tuned), None, min_episodes=20, families={**two, "s2": "fam_z"}, min_families=3)
     assert "underpowered" not in three and three["heldout_families"] == 3 and three["mcnemar_p"] < 0.01
     from dv2s_gym.loop.report import _heldout_lines, _round_row
 
@@ -127,7 +128,7 @@ def test_the_heldout_report_names_entries_the_starting_policy_mostly_passes():
     start = records({"replay_a": 10, "replay_b": 2, "replay_c": 5, "replay_d": 4})
     tuned = records({"replay_a": 1, "replay_b": 0, "replay_c": 1, "replay_d": 0})
     families = {"replay_a": "a", "replay_b": "b", "replay_c": "c", "replay_d": "d"}
-    summary = heldout_comparison(start, tuned, None, min_episodes=20, families=families, min_families=3)
+    summary = heldout_comparison(held(start), held(tuned), None, min_episodes=20, families=families, min_families=3)
     [line] = [line for line in _heldout_lines(summary) if "fewer than half" in line]
     assert "of replay_b (2 of 10), replay_d (4 of 10):" in line and "at its own seed only" in line
 
@@ -148,7 +149,7 @@ def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_
         add(f"replay_a_{i}", "fam_a", True, False)
     add("replay_b", "fam_b", True, True)
     add("replay_c", "fam_c", True, True)
-    summary = heldout_comparison(start, tuned, None, min_episodes=20, families=families, min_families=3)
+    summary = heldout_comparison(held(start), held(tuned), None, min_episodes=20, families=families, min_families=3)
     assert summary["relative_drop"] == pytest.approx(20 / 28)
     # drawing three families with replacement can leave out family A (drop 0) or take only it (drop 1): resampling
     # the 7 scenarios as if independent gave [0.43, 1.0]
@@ -169,26 +170,26 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     start = records([True] * 18 + [False] * 2)
     tuned = records([True] * 6 + [False] * 14)
     control = records([True] * 16 + [False] * 4)
-    full = heldout_comparison(start, tuned, control, min_episodes=20)
+    full = heldout_comparison(held(start), held(tuned), held(control), min_episodes=20)
     assert "underpowered" not in full
     assert full["after"]["k"] == 6 and full["control"]["k"] == 16 and full["before"]["k"] == 18
     assert full["relative_drop"] == pytest.approx(1 - 6 / 18) and full["mcnemar_p"] < 0.01
     assert full["vs_control"]["table"] == {"both_fail": 6, "fine_tuned_only": 0, "control_only": 10, "neither": 4}
     assert full["vs_control"]["mcnemar_p"] == pytest.approx(2 * 0.5 ** 10)
-    short = heldout_comparison(start, tuned, control, min_episodes=21)
+    short = heldout_comparison(held(start), held(tuned), held(control), min_episodes=21)
     assert "fewer than the 21 needed" in short["underpowered"]
     assert short["relative_drop"] is None and short["mcnemar_p"] is None
     assert short["vs_control"]["mcnemar_p"] is None and short["vs_control"]["relative_drop"] is None
     assert short["after"] == full["after"] and short["control"] == full["control"]  # the rates stay
-    assert "control" not in heldout_comparison(start, tuned, None, min_episodes=1)
+    assert "control" not in heldout_comparison(held(start), held(tuned), None, min_episodes=1)
     start[0]["failure"], start[1]["failure"] = {"type": "stall"}, {"type": "collision"}
     tuned[0]["failure"] = {"type": "stall"}
-    kinds = heldout_comparison(start, tuned, control, min_episodes=1)["failure_types"]
+    kinds = heldout_comparison(held(start), held(tuned), held(control), min_episodes=1)["failure_types"]
     assert kinds == {"start": {"stall": 1, "collision": 1}, "fine_tuned": {"stall": 1}, "control": {}}
     from dv2s_gym.loop.report import render_markdown
 
     start[2]["failure"] = {"type": "off_road"}
-    after = heldout_comparison(start, tuned, control, min_episodes=1)
+    after = heldout_comparison(held(start), held(tuned), held(control), min_episodes=1)
     record = {"round": 1, "steps": {"after": after}}
     markdown = render_markdown(written_report({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo",
                                                "rounds": [record]}))
@@ -212,17 +213,17 @@ def test_the_control_test_needs_the_minimums_and_the_floor_on_its_own_pairs():
             after.append({**key, "failed": False, "error": None})
             control.append({**key, "failed": False, "error": None} if seed == 10000 else
                            {**key, "failed": None, "error": "RuntimeError: worker hung"})
-    summary = heldout_comparison(before, after, control, min_episodes=20, families=families, min_families=3)
+    summary = heldout_comparison(held(before), held(after), held(control), min_episodes=20, families=families, min_families=3)
     assert summary["pairs"] == 20 and summary["vs_control"]["pairs"] == 4 and "underpowered" not in summary
     assert summary["significantly_worse"]["control"] is None and summary["vs_control"]["mcnemar_p"] is None
     assert "against the control: only 4 held-out episode(s)" in summary["vs_control"]["underpowered"]
     record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
                                                            "regress": {"verdict": "PASS", "reason": "stand-in"}}}
     judged = judge_round(record)
-    assert judged["verdict"] == "NOT ACCEPTED" and judged["decided_by"] == "heldout_vs_control"
-    assert "against the control did not run (against the control: only 4" in judged["reason"]
+    assert judged.verdict == "NOT ACCEPTED" and judged.decided_by == "heldout_vs_control"
+    assert "against the control did not run (against the control: only 4" in judged.reason
     # with minimums of zero the floor still holds for the control's pairs
-    low = heldout_comparison(before, after, control, min_episodes=0, families=families, min_families=0)
+    low = heldout_comparison(held(before), held(after), held(control), min_episodes=0, families=families, min_families=0)
     assert low["significantly_worse"]["start"] is not None and low["significantly_worse"]["control"] is None
     assert "fewer than 6" in low["vs_control"]["underpowered"]
 
@@ -281,7 +282,7 @@ def test_paired_evaluation_runs_identical_episodes_before_and_after(tmp_path):
     assert [(r["scenario"], r["seed"]) for r in before] == [(r["scenario"], r["seed"]) for r in after] == episodes
     # same policy, same scene and seed: the very same trajectory, so the pairing is real
     assert [r["result"]["trajectory_hash"] for r in before] == [r["result"]["trajectory_hash"] for r in after]
-    summary = paired_summary(before, after)
+    summary = paired_summary(held(before), held(after))
     assert summary["pairs"] == 4 and summary["table"]["before_only"] == summary["table"]["after_only"] == 0
     assert summary["mcnemar_p"] == 1.0
     # a reopened store serves the finished episodes without running them
@@ -313,14 +314,14 @@ def test_paired_summary_counts_and_drop():
 
     before = records([True] * 8 + [False] * 2)
     after = records([True, False, False, False, True, False, False, False, True, False])
-    summary = paired_summary(before, after)
+    summary = paired_summary(held(before), held(after))
     assert summary["before"]["k"] == 8 and summary["after"]["k"] == 3
     assert summary["relative_drop"] == pytest.approx(5 / 8)
     assert summary["table"] == {"both_fail": 2, "after_only": 1, "before_only": 6, "neither": 1}
     assert 0.0 < summary["mcnemar_p"] < 0.2
     assert summary["before"]["low"] < 0.8 < summary["before"]["high"]
     after[0]["error"] = "crashed"
-    assert paired_summary(before, after)["pairs"] == 9
+    assert paired_summary(held(before), held(after))["pairs"] == 9
 
 
 # --------------------------------------------------------------------------- the loop
@@ -460,7 +461,7 @@ class _StandIns:
             self.evaluations.append((role, policy, list(episodes)))
             outcome = {"reference": lambda i: False, "before": lambda i: True, "control": lambda i: i % 2 == 0,
                        "after": lambda i: i % 4 == 0, **(fails or {})}[role]
-            return [{"role": role, "scenario": s, "seed": seed, "failed": outcome(i), "error": None}
+            return [HeldOutEpisode(role=role, scenario=s, seed=seed, failed=outcome(i))
                     for i, (s, seed) in enumerate(episodes)]
 
         def regression(candidate, baseline=None, settings=None, **options):
@@ -599,10 +600,10 @@ def test_held_out_episodes_the_reference_driver_does_not_pass_are_left_out_count
 
 
 def test_reference_gate_counts_failures_and_errors_and_names_families_left_out_entirely():
-    records = [{"scenario": "a1", "seed": 1, "failed": True, "failure": {"type": "stall"}, "error": None},
-               {"scenario": "a1", "seed": 2, "failed": None, "failure": None, "error": "boom"},
-               {"scenario": "b1", "seed": 1, "failed": True, "failure": {"type": "collision"}, "error": None},
-               {"scenario": "b2", "seed": 1, "failed": False, "failure": None, "error": None}]
+    records = held([{"scenario": "a1", "seed": 1, "failed": True, "failure": {"type": "stall"}, "error": None},
+                    {"scenario": "a1", "seed": 2, "failed": None, "failure": None, "error": "boom"},
+                    {"scenario": "b1", "seed": 1, "failed": True, "failure": {"type": "collision"}, "error": None},
+                    {"scenario": "b2", "seed": 1, "failed": False, "failure": None, "error": None}])
     gate = loop_module.reference_gate(records, {"a1": "A", "b1": "B", "b2": "B"})
     assert gate["excluded"] == [["a1", 1], ["a1", 2], ["b1", 1]] and gate["kept"] == 1
     assert (gate["failed"], gate["errored"]) == (2, 1)
@@ -1054,8 +1055,9 @@ def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, 
     _regression_verdicts(monkeypatch, {"round_1": "FAIL", "round_2": "PASS", "round_3": "INCONCLUSIVE"})
 
     def over_rounds(report, out=None, folder=None):  # the stand-in regression test writes no report to pair
-        tested = [r for r in report.get("rounds", []) if (r.get("steps") or {}).get("regress")]
-        return None if len(tested) < 2 else {"rounds": [1, tested[-1]["round"]], "verdict": "PASS", "reason": "ok"}
+        tested = [r for r in map(RoundRecord.from_dict, report.get("rounds", [])) if r.steps.regress is not None]
+        return None if len(tested) < 2 else FinalVsStart(rounds=(1, tested[-1].round), verdict="PASS", reason="ok",
+                                                         null_fields=frozenset())
 
     monkeypatch.setattr(loop_report, "final_vs_start", over_rounds)
     miner, lines = FakeMiner(WIRING["scenarios"], failures_per_round=6), []
@@ -1095,12 +1097,13 @@ def test_the_next_round_follows_the_policy_to_use_when_the_rounds_are_judged_aga
     judged = []
 
     def over_rounds(report, out=None, folder=None):
-        tested = [r for r in report.get("rounds", []) if (r.get("steps") or {}).get("regress")]
+        tested = [r for r in map(RoundRecord.from_dict, report.get("rounds", [])) if r.steps.regress is not None]
         if len(tested) < 2:
             return None
         judged.append(len(tested))
-        return {"start": "dv2s-ppo", "final": tested[-1].get("new_policy"), "rounds": [1, tested[-1]["round"]],
-                "verdict": over_all_rounds, "reason": f"stand-in {over_all_rounds}", "episodes": 8}
+        return FinalVsStart(start="dv2s-ppo", final=tested[-1].new_policy, rounds=(1, tested[-1].round),
+                            verdict=over_all_rounds, reason=f"stand-in {over_all_rounds}", episodes=8,
+                            null_fields=frozenset())
 
     monkeypatch.setattr(loop_report, "final_vs_start", over_rounds)
     miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
@@ -1142,7 +1145,7 @@ def test_errored_episodes_are_counted_per_step_and_named_in_the_log_the_record_a
     def held_out(role, policy, episodes, **options):
         records = evaluate(role, policy, episodes, **options)
         if role == "after":  # the fine-tuned policy's first held-out episode errors
-            records[0] = {**records[0], "failed": None, "error": unsampleable}
+            records[0] = records[0].replace(failed=None, error=unsampleable)
         return records
 
     def regress(candidate, baseline=None, settings=None, **options):
@@ -1233,21 +1236,21 @@ def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_
     control = [dict(r) for r in start]
     tuned = [{"scenario": s, "seed": seed, "failed": False, "error": "RuntimeError: NaN action" if s == "c1" else None}
              for s in families for seed in range(10)]
-    summary = heldout_comparison(start, tuned, control, min_episodes=20, families=families, min_families=3)
+    summary = heldout_comparison(held(start), held(tuned), held(control), min_episodes=20, families=families, min_families=3)
     assert summary["pairs"] == 20 and summary["heldout_families"] == 2 and summary["sampled_families"] == 3
     assert "only 2 held-out families (parent scenarios) with a tested pair" in summary["underpowered"]
     assert summary["significantly_worse"] == {"start": None, "control": None}
     record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
                                                             "regress": {"verdict": "PASS", "reason": "r"}}}
-    assert judge_round(record)["verdict"] == "NOT ACCEPTED"
+    assert judge_round(record).verdict == "NOT ACCEPTED"
     from dv2s_gym.loop.report import _heldout_lines
 
     assert "from 2 families (3 scenarios, 1 more with no tested pair)" in "\n".join(_heldout_lines(summary))
     # with every family tested the same round is judged, and the sentence gives the pairs beside p
     tuned = [{**r, "error": None} for r in tuned]
-    summary = heldout_comparison(start, tuned, control, min_episodes=20, families=families, min_families=3)
+    summary = heldout_comparison(held(start), held(tuned), held(control), min_episodes=20, families=families, min_families=3)
     judged = judge_round({**record, "steps": {**record["steps"], "after": summary}})
-    assert judged["verdict"] == "ACCEPTED" and "on 30 held-out pairs from 3 families)" in judged["reason"]
+    assert judged.verdict == "ACCEPTED" and "on 30 held-out pairs from 3 families)" in judged.reason
 
 
 def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_steps_test(tmp_path, monkeypatch):

@@ -11,6 +11,7 @@ import pytest
 
 import policies.training as training
 from cli_helpers import one_line_error, run
+from scenario_bank.records import HeldOutEpisode
 from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.loop.run import DEFAULTS, LoopError
 from loop_helpers import FakeMiner, run_loop
@@ -88,7 +89,7 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
 
     def fake_evaluate(role, policy, episodes, *, env_config=None, **kwargs):
         evaluations.append((role, env_config))
-        return [{"role": role, "scenario": s, "seed": seed, "failed": role == "before", "error": None}
+        return [HeldOutEpisode(role=role, scenario=s, seed=seed, failed=role == "before")
                 for s, seed in episodes]
 
     def fake_regression(candidate, baseline, settings, **kwargs):

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from dv2s_gym.loop.verdict import FAMILY_RULE, heldout_worse, recommendation
-from loop_helpers import written_report
+from loop_helpers import held, written_report
 
 
 def _round(number, verdict, *, control_only=0, fine_tuned_only=0, p=1.0):
@@ -100,8 +100,8 @@ def test_a_round_too_small_to_judge_says_so_and_points_to_the_evidence_profile()
 # --------------------------------------------------------------------------- the held-out tests, as the loop records them
 def _episodes(failing):
     """Held-out records of 4 families x 2 scenarios x 4 seeds; ``failing(family, scenario, seed)`` says which fail."""
-    return [{"scenario": f"f{f}_s{s}", "seed": seed, "failed": bool(failing(f, s, seed)), "error": None}
-            for f in range(4) for s in range(2) for seed in range(4)]
+    return held([{"scenario": f"f{f}_s{s}", "seed": seed, "failed": bool(failing(f, s, seed)), "error": None}
+                 for f in range(4) for s in range(2) for seed in range(4)])
 
 
 def _judged(before, after, control, regress="PASS", **minimums):
@@ -193,7 +193,7 @@ def test_minimums_of_zero_do_not_let_a_single_held_out_pair_be_judged():
     from dv2s_gym.loop.run import heldout_comparison
 
     one = [{"scenario": "f0_s0", "seed": 0, "failed": False, "error": None}]
-    summary = heldout_comparison(one, one, one, min_episodes=0, families={"f0_s0": "family_0"}, min_families=0)
+    summary = heldout_comparison(held(one), held(one), held(one), min_episodes=0, families={"f0_s0": "family_0"}, min_families=0)
     assert summary["pairs"] == 1 and summary["heldout_families"] == 1
     assert summary["significantly_worse"] == {"start": None, "control": None}
     assert "fewer than 6" in summary["underpowered"] and "cannot reach p < 0.05" in summary["underpowered"]
@@ -203,9 +203,9 @@ def test_minimums_of_zero_do_not_let_a_single_held_out_pair_be_judged():
     assert verdict.verdict == "NOT ACCEPTED" and "TOO SMALL TO JUDGE" in verdict.sentence
     # five pairs are still too few; six (all one family) are judged
     five = [{"scenario": "f0_s0", "seed": seed, "failed": False, "error": None} for seed in range(5)]
-    assert heldout_comparison(five, five, None, min_episodes=0, min_families=0)["underpowered"]
+    assert heldout_comparison(held(five), held(five), None, min_episodes=0, min_families=0)["underpowered"]
     six = five + [{"scenario": "f0_s0", "seed": 5, "failed": False, "error": None}]
-    judged = heldout_comparison(six, six, None, min_episodes=0, min_families=0)
+    judged = heldout_comparison(held(six), held(six), None, min_episodes=0, min_families=0)
     assert "underpowered" not in judged and judged["significantly_worse"]["start"]["pairs"] == 6
 
 
@@ -339,7 +339,7 @@ def _accepted_round():
     families = {f"F{i}_replay": f"F{i}" for i in range(4)}
     before = [{"scenario": n, "seed": s, "failed": True, "error": None} for n in families for s in range(5)]
     after = [{"scenario": n, "seed": s, "failed": False, "error": None} for n in families for s in range(5)]
-    summary = heldout_comparison(before, after, after, min_episodes=20, families=families, min_families=3)
+    summary = heldout_comparison(held(before), held(after), held(after), min_episodes=20, families=families, min_families=3)
     return {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
             "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
 
@@ -406,7 +406,7 @@ def _one_family_round(fine_tuned_only, *, pairs=50, other_only=0, margin=None):
     before = [{"scenario": "F_replay", "seed": s, "failed": fine_tuned_only <= s < fine_tuned_only + other_only,
                "error": None} for s in range(pairs)]
     after = [{"scenario": "F_replay", "seed": s, "failed": s < fine_tuned_only, "error": None} for s in range(pairs)]
-    summary = heldout_comparison(before, after, None, min_episodes=pairs, families={"F_replay": "F"}, min_families=1,
+    summary = heldout_comparison(held(before), held(after), None, min_episodes=pairs, families={"F_replay": "F"}, min_families=1,
                                  margin=margin)
     return {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
             "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
@@ -534,12 +534,12 @@ def test_the_held_out_gate_has_no_margin_and_says_against_whom_and_where():
 
 
 def test_a_round_is_judged_once_it_fine_tuned_or_named_a_policy():
-    from dv2s_gym.loop.verdict import judge_round
+    from dv2s_gym.loop.verdict import Judgement, judge_round
 
     assert judge_round({"round": 1, "steps": {"mine": {}}}) is None and judge_round({"round": 1}) is None
     for record in ({"round": 1, "steps": {"fine_tune": {}}}, {"round": 1, "new_policy": "ppo:x", "steps": {}}):
-        assert judge_round(record) == {"verdict": "NOT ACCEPTED", "decided_by": "regression",
-                                       "reason": "the round has no regression test yet"}
+        assert judge_round(record) == Judgement(verdict="NOT ACCEPTED", decided_by="regression",
+                                                reason="the round has no regression test yet")
 
 
 def test_a_held_out_test_that_did_not_run_says_which_and_why():
@@ -567,18 +567,18 @@ def test_a_held_out_test_that_did_not_run_says_which_and_why():
     ]
     for after, decided_by, words in cases:
         judged = judge_round(_passed_round(after))
-        assert judged["verdict"] == "NOT ACCEPTED" and judged["decided_by"] == decided_by, after
-        assert words + ", so a harm on the held-out families is not ruled out" in judged["reason"], judged["reason"]
+        assert judged.verdict == "NOT ACCEPTED" and judged.decided_by == decided_by, after
+        assert words + ", so a harm on the held-out families is not ruled out" in judged.reason, judged.reason
     # no control arm recorded at all: the test against the start is enough
     alone = judge_round(_passed_round({"pairs": 20, "significantly_worse": {"start": tested, "control": None}}))
-    assert alone["verdict"] == "ACCEPTED" and alone["reason"].endswith("; no control arm to compare with; no held-out "
+    assert alone.verdict == "ACCEPTED" and alone.reason.endswith("; no control arm to compare with; no held-out "
                                                                      f"family worse for the fine-tuned policy by more "
                                                                      f"than the margin +2.0 pp ({FAMILY_RULE})")
     both = judge_round(_passed_round({"pairs": 20, "control": {"k": 1}, "vs_control": {},
                                       "significantly_worse": {"start": tested, "control": _held_out_test("control")}}))
-    assert both["verdict"] == "ACCEPTED" and "no control arm" not in both["reason"]
-    assert "not significantly worse than the starting policy (p = " in both["reason"]
-    assert "and not significantly worse than the control (p = 1 on 20 held-out pairs from 1 family)" in both["reason"]
+    assert both.verdict == "ACCEPTED" and "no control arm" not in both.reason
+    assert "not significantly worse than the starting policy (p = " in both.reason
+    assert "and not significantly worse than the control (p = 1 on 20 held-out pairs from 1 family)" in both.reason
 
 
 def test_the_cross_round_check_changes_only_an_accepted_verdict():

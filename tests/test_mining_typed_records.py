@@ -46,18 +46,9 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "mining.behaviour.Behaviour.from_dict": "reads the behaviour's JSON object, as report.json holds it",
     "mining.sampling.rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
     "loop.run.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
-    "loop.run.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
-    "loop.run.heldout_comparison": "takes the held-out store's rows (heldout.jsonl; HeldOutEpisode records or their "
-                               "JSON objects)",
     "loop.run.untouched_settings": "takes the policy's env config, a JSON object of its model card",
-    "loop.record.HeldOutComparison.held_out_test": "returns one recorded held-out test (loop_verdict.heldout_worse's "
-                                                   "JSON object in the after step's significantly_worse)",
-    "loop.record.RoundRecord.with_cross_round_check": "takes the cross-round check as report.json records it in a "
-                                                      "round (loop_report.final_vs_start's JSON object)",
-    "loop.verdict.family_harm": "returns the held-out families' harm check as loop.json records it in a held-out test",
-    "loop.verdict.heldout_worse": "returns a held-out test as loop.json records it (significantly_worse)",
     "loop.verdict.recommendation": "takes the body of report.json (and returns its typed Recommendation)",
-    "loop.report.final_vs_start": "takes the body of report.json and returns its final_vs_start object",
+    "loop.report.final_vs_start": "takes the body of report.json (and returns its typed FinalVsStart)",
     "loop.report.with_cross_round_checks": "takes and returns the body of report.json",
     "loop.report.render_markdown": "renders the body of report.json",
     "loop.report.render_html": "renders the body of report.json",
@@ -352,13 +343,15 @@ def test_a_run_s_origin_is_recorded_as_the_json_object_the_reports_read(tmp_path
 
 def test_a_held_out_rate_is_a_rate_record_with_one_formatter():
     from dv2s_gym.loop.heldout import paired_summary
-    from dv2s_gym.loop.record import PairedSummary, PairedTable, Rate
+    from dv2s_gym.loop.record import PairedSummary, PairedTable
+    from policies.stats import Rate
     from dv2s_gym.loop.report import rate_text
-    from scenario_bank.records import RecordError
+    from scenario_bank.records import HeldOutEpisode, RecordError
 
     before = [{"scenario": "s", "seed": seed, "failed": seed < 3, "error": None} for seed in range(4)]
     after = [{"scenario": "s", "seed": seed, "failed": seed < 1, "error": None} for seed in range(4)]
-    summary = paired_summary(before, after)
+    summary = paired_summary(*([HeldOutEpisode.from_dict({"role": "before", **row}) for row in rows]
+                               for rows in (before, after)))
     assert isinstance(summary, PairedSummary) and isinstance(summary.before, Rate)
     assert isinstance(summary.table, PairedTable) and summary.table.before_only == 2
     assert (summary.before.k, summary.before.n, summary.after.k) == (3, 4, 1)

@@ -412,43 +412,43 @@ def test_every_listed_library_private_name_is_still_used_where_listed():
 
 
 PLANTS_BY_NAME = {
-    "parameter default": "def _planted(module=heldout):\n    return module._rate\n",
-    "for target": "def _planted():\n    for module in (heldout,):\n        return module._rate\n",
-    "with target": "def _planted():\n    with contextlib.nullcontext(heldout) as module:\n        return module._rate\n",
-    "tuple unpacking": "def _planted():\n    module, other = heldout, None\n    return module._rate\n",
-    "starred unpacking": "def _planted():\n    [module] = [heldout]\n    return module._rate\n",
-    "dict holder": "def _planted():\n    return {'m': heldout}['m']._rate\n",
-    "list index": "def _planted():\n    return [heldout][0]._rate\n",
-    "lambda parameter": "def _planted():\n    return (lambda module: module._rate)(heldout)\n",
-    "__getattribute__": "def _planted():\n    return heldout.__getattribute__('_rate')\n",
-    "object.__getattribute__": "def _planted():\n    return object.__getattribute__(heldout, '_rate')\n",
-    "operator.attrgetter": "def _planted():\n    return operator.attrgetter('_rate')(heldout)\n",
-    "inspect.getmembers": "def _planted():\n    return dict(inspect.getmembers(heldout))['_rate']\n",
+    "parameter default": "def _planted(module=heldout):\n    return module._relative_drop\n",
+    "for target": "def _planted():\n    for module in (heldout,):\n        return module._relative_drop\n",
+    "with target": "def _planted():\n    with contextlib.nullcontext(heldout) as module:\n        return module._relative_drop\n",
+    "tuple unpacking": "def _planted():\n    module, other = heldout, None\n    return module._relative_drop\n",
+    "starred unpacking": "def _planted():\n    [module] = [heldout]\n    return module._relative_drop\n",
+    "dict holder": "def _planted():\n    return {'m': heldout}['m']._relative_drop\n",
+    "list index": "def _planted():\n    return [heldout][0]._relative_drop\n",
+    "lambda parameter": "def _planted():\n    return (lambda module: module._relative_drop)(heldout)\n",
+    "__getattribute__": "def _planted():\n    return heldout.__getattribute__('_relative_drop')\n",
+    "object.__getattribute__": "def _planted():\n    return object.__getattribute__(heldout, '_relative_drop')\n",
+    "operator.attrgetter": "def _planted():\n    return operator.attrgetter('_relative_drop')(heldout)\n",
+    "inspect.getmembers": "def _planted():\n    return dict(inspect.getmembers(heldout))['_relative_drop']\n",
     "class attribute holder": "class _Holder:\n    module = heldout\n\n\ndef _planted():\n"
-                              "    return _Holder.module._rate\n",
-    "sys.modules": "def _planted():\n    return sys.modules['dv2s_gym.loop.heldout']._rate\n",
-    "pydoc.locate": "def _planted():\n    return pydoc.locate('dv2s_gym.loop.heldout._rate')\n",
-    "match capture": "def _planted():\n    match heldout:\n        case module:\n            return module._rate\n",
-    "comprehension variable": "def _planted():\n    return [module._rate for module in [heldout]]\n",
-    "functools.partial(getattr)": "def _planted():\n    return functools.partial(getattr, heldout)('_rate')\n",
-    "builtins.getattr": "def _planted():\n    return builtins.getattr(heldout, '_rate')\n",
+                              "    return _Holder.module._relative_drop\n",
+    "sys.modules": "def _planted():\n    return sys.modules['dv2s_gym.loop.heldout']._relative_drop\n",
+    "pydoc.locate": "def _planted():\n    return pydoc.locate('dv2s_gym.loop.heldout._relative_drop')\n",
+    "match capture": "def _planted():\n    match heldout:\n        case module:\n            return module._relative_drop\n",
+    "comprehension variable": "def _planted():\n    return [module._relative_drop for module in [heldout]]\n",
+    "functools.partial(getattr)": "def _planted():\n    return functools.partial(getattr, heldout)('_relative_drop')\n",
+    "builtins.getattr": "def _planted():\n    return builtins.getattr(heldout, '_relative_drop')\n",
     "__import__ with fromlist": "def _planted():\n"
-                                "    return __import__('dv2s_gym.loop.heldout', fromlist=['x'])._rate\n",
-    "pkgutil.resolve_name": "def _planted():\n    return pkgutil.resolve_name('dv2s_gym.loop.heldout:_rate')\n",
-    "a class's private method": "def _planted(record):\n    return heldout.HeldOutStore._rate(record)\n",
+                                "    return __import__('dv2s_gym.loop.heldout', fromlist=['x'])._relative_drop\n",
+    "pkgutil.resolve_name": "def _planted():\n    return pkgutil.resolve_name('dv2s_gym.loop.heldout:_relative_drop')\n",
+    "a class's private method": "def _planted(record):\n    return heldout.HeldOutStore._relative_drop(record)\n",
 }
-"""Ways to reach ``heldout``'s private ``_rate`` from another module that no binding-based rule follows."""
+"""Ways to reach ``heldout``'s private ``_relative_drop`` from another module that no binding-based rule follows."""
 
 
 @pytest.mark.parametrize("family", sorted(PLANTS_BY_NAME))
 def test_a_private_name_is_refused_whatever_the_spelling(tmp_path, family):
-    """A copy of a real module (which imports ``heldout`` and does not define ``_rate``) with a function appended
-    that reaches ``_rate``: the by-name rule reports it on the planted lines, and only there."""
+    """A copy of a real module (which imports ``heldout`` and does not define ``_relative_drop``) with a function appended
+    that reaches ``_relative_drop``: the by-name rule reports it on the planted lines, and only there."""
     modules = list(_modules())
     index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
     source = modules[index][1].read_text(encoding="utf-8")
-    assert "from dv2s_gym.loop import heldout\n" in source and "_rate" not in defined_names(ast.parse(source))
-    assert "_rate" in defined_names(ast.parse((ROOT / "dv2s_gym/loop/heldout.py").read_text(encoding="utf-8")))
+    assert "from dv2s_gym.loop import heldout\n" in source and "_relative_drop" not in defined_names(ast.parse(source))
+    assert "_relative_drop" in defined_names(ast.parse((ROOT / "dv2s_gym/loop/heldout.py").read_text(encoding="utf-8")))
     header = "\n\nimport builtins\nimport contextlib\nimport functools\nimport inspect\nimport operator\n" \
              "import pkgutil\nimport pydoc\nimport sys\n\n\n"
     copy = tmp_path / "loop.py"
@@ -458,7 +458,7 @@ def test_a_private_name_is_refused_whatever_the_spelling(tmp_path, family):
     modules[index] = ("dv2s_gym.loop.run", copy)
     added = set(private_names_by_name(modules, only="dv2s_gym.loop.run"))
     first = len((source + header).splitlines())
-    assert added and all(name == "_rate" and line > first for _, line, name in added)
+    assert added and all(name == "_relative_drop" and line > first for _, line, name in added)
 
 
 def test_a_string_rule_leaves_suffixes_and_a_modules_own_names_alone(tmp_path):
@@ -468,7 +468,7 @@ def test_a_string_rule_leaves_suffixes_and_a_modules_own_names_alone(tmp_path):
     index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
     copy = tmp_path / "loop.py"
     copy.write_text(modules[index][1].read_text(encoding="utf-8") + "\n\n\n_own = 1\n\n\n"
-                    "def _planted(name):\n    return f'{name}_rate', name.endswith('_rate'), getattr(_planted, '_own')\n",
+                    "def _planted(name):\n    return f'{name}_relative_drop', name.endswith('_relative_drop'), getattr(_planted, '_own')\n",
                     encoding="utf-8")
     modules[index] = ("dv2s_gym.loop.run", copy)
     assert private_names_by_name(modules, only="dv2s_gym.loop.run") == []
@@ -502,26 +502,26 @@ def test_the_check_sees_both_ways_in(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("planted, name", [
-    ('getattr(heldout, "_rate")', "_rate"),
-    ('getattr(heldout, "_rate", None)', "_rate"),
-    ('hasattr(heldout, "_rate")', "_rate"),
-    ('vars(heldout)["_rate"]', "_rate"),
-    ('vars(heldout).get("_rate")', "_rate"),
-    ('heldout.__dict__["_rate"]', "_rate"),
+    ('getattr(heldout, "_relative_drop")', "_relative_drop"),
+    ('getattr(heldout, "_relative_drop", None)', "_relative_drop"),
+    ('hasattr(heldout, "_relative_drop")', "_relative_drop"),
+    ('vars(heldout)["_relative_drop"]', "_relative_drop"),
+    ('vars(heldout).get("_relative_drop")', "_relative_drop"),
+    ('heldout.__dict__["_relative_drop"]', "_relative_drop"),
     ("dir(heldout)", NAMESPACE),
     ('getattr(heldout, "_" + "rate")', COMPUTED),
-    ("module = heldout\n    return module._rate", "_rate"),
-    ("module = dv2s_gym.loop.heldout\n    return module._rate", "_rate"),
-    ('module = importlib.import_module("dv2s_gym.loop.heldout")\n    return module._rate', "_rate"),
-    ('return import_module("dv2s_gym.loop.heldout")._rate', "_rate"),
+    ("module = heldout\n    return module._relative_drop", "_relative_drop"),
+    ("module = dv2s_gym.loop.heldout\n    return module._relative_drop", "_relative_drop"),
+    ('module = importlib.import_module("dv2s_gym.loop.heldout")\n    return module._relative_drop', "_relative_drop"),
+    ('return import_module("dv2s_gym.loop.heldout")._relative_drop', "_relative_drop"),
     ('spec = importlib.util.spec_from_file_location("dv2s_gym.loop.heldout", where)\n'
-     '    return importlib.util.module_from_spec(spec)._rate', "_rate"),
+     '    return importlib.util.module_from_spec(spec)._relative_drop', "_relative_drop"),
     ('module = importlib.util.module_from_spec(importlib.util.spec_from_file_location(\n'
-     '        "copy", ROOT / "dv2s_gym/loop/heldout.py"))\n    return module._rate', "_rate"),
+     '        "copy", ROOT / "dv2s_gym/loop/heldout.py"))\n    return module._relative_drop', "_relative_drop"),
 ])
 def test_the_check_sees_private_names_reached_by_reflection_or_a_rebound_name(tmp_path, planted, name):
     """A copy of a real module (which imports ``heldout``) with a function appended that reaches ``heldout``'s
-    private ``_rate`` another way than ``from ... import _rate`` or ``heldout._rate``."""
+    private ``_relative_drop`` another way than ``from ... import _relative_drop`` or ``heldout._relative_drop``."""
     modules = list(_modules())
     index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
     source = modules[index][1].read_text(encoding="utf-8")

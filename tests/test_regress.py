@@ -17,6 +17,7 @@ from dv2s_gym.regress import (
 from regress_call import run_regression
 from dv2s_gym.regress.html import MAX_VIDEOS
 from dv2s_gym.regress.outputs import write_reports
+from dv2s_gym.regress.records import RegressReport
 from dv2s_gym.regress.report import SCHEMA, SCHEMA_VERSION
 from dv2s_gym.regress.replay import replay_episode
 from dv2s_gym.regress.tasks import KIND
@@ -222,8 +223,8 @@ def test_markdown_puts_the_regressed_scenarios_first_and_fits_a_comment(tmp_path
     rows = [line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| `")]
     assert rows[:3] == ["`broken`", "`alpha`", "`calm`"]  # worst first, then by name
     assert "(the candidate policy of `../old/report.json`)" in text and str(tmp_path) not in text
-    huge = dict(report, newly_failing=[], errors=[{"id": f"broken/{k}", "role": "candidate", "error": "x" * 400}
-                                                   for k in range(5000)])
+    huge = RegressReport.from_json(dict(report.to_json(), newly_failing=[], errors=[
+        {"id": f"broken/{k}", "role": "candidate", "error": "x" * 400} for k in range(5000)]))
     assert len(write_markdown(huge, tmp_path / "huge.md").read_text()) <= MARKDOWN_LIMIT + 200
 
 

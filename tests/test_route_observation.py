@@ -17,6 +17,7 @@ from envs.dv2s_env import DV2SEnv
 from envs.errors import UnknownConfigKeyError
 from envs.observations import KINEMATIC_FEATURES, ROUTE_FEATURES
 from policies import PolicySpaceError, load_policy
+from scenario_bank.records import HeldOutEpisode
 
 DEFAULT_FEATURES = ["presence", "x", "y", "vx", "vy", "cos_h", "sin_h"]
 ROUTE_OBSERVATION = {"type": "Kinematics", "vehicles_count": 8, "features": DEFAULT_FEATURES + list(ROUTE_FEATURES),
@@ -215,7 +216,7 @@ def test_the_loop_runs_every_step_with_the_route_policys_observation(tmp_path, m
 
     def fake_evaluate(role, policy, episodes, *, env_config=None, **kwargs):
         evaluations.append(env_config)
-        return [{"role": role, "scenario": s, "seed": seed, "failed": role == "before", "error": None}
+        return [HeldOutEpisode(role=role, scenario=s, seed=seed, failed=role == "before")
                 for s, seed in episodes]
 
     def fake_regression(candidate, baseline, settings, **kwargs):

@@ -79,7 +79,7 @@ def _ranked(counts: Mapping[str, Mapping[str, int]],
             for name in sorted(counts)}
 
 
-def merged_messages(found: Sequence[Mapping[str, Any]]) -> Dict[str, List[Dict[str, Any]]]:
+def merged_messages(found: Sequence[ErroredEpisodes]) -> Dict[str, List[Dict[str, Any]]]:
     """The ``messages`` of several :func:`errored_episodes` (steps, policies) added up per scenario: ``{scenario:
     [{"message", "count"[, "example"]}]}``, every distinct kind of message (:func:`message_kind`: a message recorded
     with its seed counts with the others of its kind) with its total count, the most frequent first. Every scenario
@@ -87,9 +87,11 @@ def merged_messages(found: Sequence[Mapping[str, Any]]) -> Dict[str, List[Dict[s
     counts: Dict[str, Dict[str, int]] = {}
     examples: Dict[str, Dict[str, str]] = {}
     for errored in found:
-        for name in (errored or {}).get("scenarios") or {}:
+        if errored is None:
+            continue
+        for name in errored.scenarios or {}:
             counts.setdefault(name, {})
-        for name, rows in ((errored or {}).get("messages") or {}).items():
+        for name, rows in (errored.messages or {}).items():
             into = counts.setdefault(name, {})
             for row in rows:
                 kind = message_kind(row["message"])

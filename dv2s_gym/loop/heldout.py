@@ -28,19 +28,20 @@ __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary",
 
 import numpy as np
 from dv2s_gym.mining.jsonl import read_rows
-from dv2s_gym.loop.record import PairedSummary, PairedTable, Rate
+from dv2s_gym.loop.record import PairedSummary, PairedTable
 from dv2s_gym.mining.monitors import DEFAULT_MONITOR
 from dv2s_gym.mining.tasks import HELDOUT, heldout_task
 from scenario_bank.records import HeldOutEpisode
-from dv2s_gym.regress.stats import mcnemar_exact, PairedTable as Outcomes, wilson_interval
+from dv2s_gym.regress.stats import mcnemar_exact, PairedTable as Outcomes
+from policies.stats import Rate
 from dv2s_gym.workers.pool import LocalBackend
 from dv2s_gym.workers.settings import WorkerSettings
 
 Episode = Tuple[str, int]
 
-def episode_failed(record: Mapping[str, Any]) -> Optional[bool]:
+def episode_failed(record: HeldOutEpisode) -> Optional[bool]:
     """The record's outcome: ``True`` failed, ``False`` did not, ``None`` an error."""
-    return None if record.get("error") else bool(record.get("failed"))
+    return None if record.error else bool(record.failed)
 
 
 class HeldOutStore:
@@ -95,8 +96,9 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
                 if bar is not None:
                     bar.update(1)
         elif tasks:
-            def finished(record: Dict[str, Any]) -> None:  # a worker's HeldOutEpisode, as JSON
-                store.append(HeldOutEpisode.from_dict({"policy": policy, **record}))
+            def finished(record: Any) -> None:  # a worker's HeldOutEpisode, or the JSON object of one it gave up on
+                store.append(record if isinstance(record, HeldOutEpisode)
+                             else HeldOutEpisode.from_dict({"policy": policy, **record}))
                 if bar is not None:
                     bar.update(1)
 
@@ -105,21 +107,17 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
     finally:
         if bar is not None:
             bar.close()
-    return [store.get(role, scenario, seed)
-            or HeldOutEpisode(role=role, scenario=scenario, seed=int(seed), policy=policy, error="did not run")
-            for scenario, seed in episodes]
-
-
-def _rate(k: int, n: int) -> Rate:
-    low, high = wilson_interval(k, n)
-    return Rate(k=k, n=n, rate=(k / n) if n else None, low=low, high=high)
+    found = [(scenario, seed, store.get(role, scenario, seed)) for scenario, seed in episodes]
+    return [record if record is not None
+            else HeldOutEpisode(role=role, scenario=scenario, seed=int(seed), policy=policy, error="did not run")
+            for scenario, seed, record in found]
 
 
 def _relative_drop(before: float, after: float) -> Optional[float]:
     return None if before <= 0 else (before - after) / before
 
 
-def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]], *,
+def paired_summary(before: Sequence[HeldOutEpisode], after: Sequence[HeldOutEpisode], *,
                    bootstrap: int = 2000, seed: int = 0,
                    families: Optional[Mapping[str, str]] = None) -> PairedSummary:
     """Rates before and after (Wilson 95 %), relative drop with a bootstrap interval resampling whole families
@@ -132,16 +130,16 @@ def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[
     drew and how many. The McNemar test stays per pair (``mcnemar_unit`` ``"pair"``): pairs within one family are
     not independent, so its p is optimistic when a family holds several pairs.
     """
-    after_by = {(r["scenario"], int(r["seed"])): r for r in after}
+    after_by = {(r.scenario, int(r.seed)): r for r in after}
     pairs: List[Tuple[str, bool, bool]] = []
     errors = 0
     for record in before:
-        twin = after_by.get((record["scenario"], int(record["seed"])))
+        twin = after_by.get((record.scenario, int(record.seed)))
         b, a = episode_failed(record), episode_failed(twin) if twin is not None else None
         if b is None or a is None:
             errors += 1
             continue
-        pairs.append((record["scenario"], b, a))
+        pairs.append((record.scenario, b, a))
     table = Outcomes.from_outcomes([a for _, _, a in pairs], [b for _, b, _ in pairs])
     n = len(pairs)
     k_before, k_after = sum(b for _, b, _ in pairs), sum(a for _, _, a in pairs)
@@ -165,7 +163,7 @@ def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[
         rows = [(b, a) for s, b, a in pairs if s == name]
         per_scenario[name] = {"n": len(rows), "before": sum(b for b, _ in rows), "after": sum(a for _, a in rows)}
     return PairedSummary(
-        pairs=n, errors=errors, before=_rate(k_before, n), after=_rate(k_after, n), relative_drop=drop,
+        pairs=n, errors=errors, before=Rate.of(k_before, n), after=Rate.of(k_after, n), relative_drop=drop,
         relative_drop_interval=tuple(interval),
         relative_drop_interval_unit="family" if families is not None else "scenario",
         relative_drop_interval_units=len(units), mcnemar_unit="pair",
@@ -176,11 +174,11 @@ def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[
         mcnemar_p=mcnemar_exact(table) if n else None, per_scenario=per_scenario)
 
 
-def failure_types(records: Iterable[Mapping[str, Any]]) -> Dict[str, int]:
+def failure_types(records: Iterable[HeldOutEpisode]) -> Dict[str, int]:
     """How many records failed with each failure type."""
     counts: Dict[str, int] = {}
     for record in records:
-        failure = record.get("failure")
+        failure = record.failure
         if failure:
             counts[failure.get("type", "?")] = counts.get(failure.get("type", "?"), 0) + 1
     return counts

@@ -24,16 +24,24 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 from policies.card_record import FineTuneMethod
+from policies.stats import Rate
 from scenario_bank.records import JsonRecord
 
-__all__ = ["ErroredEpisodes", "LoopStart", "RecordedLoopSettings", "Rate", "PairedTable", "PairedSummary",
+__all__ = ["ErroredEpisodes", "LoopStart", "RecordedLoopSettings", "PairedTable", "PairedSummary",
+           "FamilyHarmRow", "FamilyHarm", "HeldOutWorse", "HeldOutTests", "FinalVsStart",
            "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
            "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
-           "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS"]
+           "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS", "recorded"]
 
 STEPS = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 """The steps of a round, in the order they run (a round that kept no mined scenario has ``skipped`` after
 ``split`` instead of the rest)."""
+
+
+def recorded(record: Optional[JsonRecord]) -> bool:
+    """Whether ``record`` (a step's record or a part of one) holds anything: ``None`` and a record whose JSON object
+    is empty (a step recorded as ``{}``) hold nothing."""
+    return record is not None and bool(record.to_dict())
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,32 +106,6 @@ class RecordedLoopSettings(JsonRecord):
 
 
 @dataclass(frozen=True, eq=False)
-class Rate(JsonRecord):
-    """A held-out failure rate: ``k`` failed episodes of ``n``, the ``rate`` (``None`` without an episode) and its
-    95 % Wilson interval ``low``..``high`` (:func:`dv2s_gym.loop.heldout.paired_summary`)."""
-
-    k: Optional[int] = None
-    n: Optional[int] = None
-    rate: Optional[float] = None
-    low: Optional[float] = None
-    high: Optional[float] = None
-    extra: Mapping[str, Any] = field(default_factory=dict)
-    null_fields: Optional[FrozenSet[str]] = None
-
-    _KINDS: ClassVar[Dict[str, str]] = {"k": "int", "n": "int", "rate": "number", "low": "number", "high": "number"}
-    _WHAT: ClassVar[str] = "rate"
-
-    def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
-
-    def text(self) -> str:
-        """The rate as ``k/n = rate [low, high]`` (``-`` without an episode)."""
-        if self.rate is None:
-            return "-"
-        return f"{self.k}/{self.n} = {self.rate:.2f} [{self.low:.2f}, {self.high:.2f}]"
-
-
-@dataclass(frozen=True, eq=False)
 class PairedTable(JsonRecord):
     """The paired held-out table of the fine-tuned policy (``after``) against the starting one (``before``): pairs
     where both failed, only the fine-tuned one, only the start, neither."""
@@ -174,6 +156,154 @@ class PairedSummary(JsonRecord):
 
     def default_null_fields(self) -> FrozenSet[str]:
         return frozenset({"relative_drop", "mcnemar_p", "pairs_per_family"})
+
+
+@dataclass(frozen=True, eq=False)
+class FamilyHarmRow(JsonRecord):
+    """One held-out family of the harm rule (:func:`dv2s_gym.loop.verdict.family_harm`): its tested ``pairs``,
+    those only the fine-tuned policy failed (``fine_tuned_only``) and only the other failed (``other_only``), the
+    ``difference`` in failure rate (fine-tuned minus other) with its two-sided 95 % Newcombe ``interval``, the
+    one-sided non-inferiority p-value at the margin and its Holm adjustment (``holm_p``), whether that test showed
+    the family ``non_inferior`` and whether the difference is a ``harm`` (worse than the margin)."""
+
+    pairs: Optional[int] = None
+    fine_tuned_only: Optional[int] = None
+    other_only: Optional[int] = None
+    difference: Optional[float] = None
+    interval: Optional[Tuple[float, ...]] = None
+    non_inferiority_p: Optional[float] = None
+    holm_p: Optional[float] = None
+    non_inferior: Optional[bool] = None
+    harm: Optional[bool] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "pairs": "int", "fine_tuned_only": "int", "other_only": "int", "difference": "number", "interval": "list",
+        "non_inferiority_p": "number", "holm_p": "number", "non_inferior": "bool", "harm": "bool"}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("interval",)
+    _WHAT: ClassVar[str] = "held-out family"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+
+@dataclass(frozen=True, eq=False)
+class FamilyHarm(JsonRecord):
+    """The held-out families' harm rule of one held-out test (:func:`dv2s_gym.loop.verdict.family_harm`): the
+    ``margin`` and the ``rule`` in words, each tested family's row (``families``: :class:`FamilyHarmRow` by name),
+    the families whose difference is worse than the margin (``harmed``) and those shown ``non_inferior``."""
+
+    margin: Optional[float] = None
+    rule: Optional[str] = None
+    families: Mapping[str, FamilyHarmRow] = field(default_factory=dict)
+    harmed: Tuple[str, ...] = ()
+    non_inferior: Tuple[str, ...] = ()
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"margin": "number", "rule": "str", "families": "object",
+                                        "harmed": "strings", "non_inferior": "strings"}
+    _ITEMS: ClassVar[Dict[str, type]] = {"families": FamilyHarmRow}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("harmed", "non_inferior")
+    _WHAT: ClassVar[str] = "family harm"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+
+@dataclass(frozen=True, eq=False)
+class HeldOutWorse(JsonRecord):
+    """One held-out test (:func:`dv2s_gym.loop.verdict.heldout_worse`): is the fine-tuned policy significantly
+    ``worse`` than the policy it is tested ``against`` (``start`` or ``control``) on the held-out families, by
+    ``test``; the number of ``families`` and ``pairs`` tested, the pooled discordant counts (``fine_tuned_only``,
+    ``other_only``) and pooled one-sided ``p_value``, the ``worse_families``, the ``reason`` in words and the
+    families' harm rule (``family_harm``: :class:`FamilyHarm`)."""
+
+    against: Optional[str] = None
+    test: Optional[str] = None
+    worse: Optional[bool] = None
+    families: Optional[int] = None
+    pairs: Optional[int] = None
+    fine_tuned_only: Optional[int] = None
+    other_only: Optional[int] = None
+    p_value: Optional[float] = None
+    worse_families: Tuple[str, ...] = ()
+    reason: Optional[str] = None
+    family_harm: Optional[FamilyHarm] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "against": "str", "test": "str", "worse": "bool", "families": "int", "pairs": "int",
+        "fine_tuned_only": "int", "other_only": "int", "p_value": "number", "worse_families": "strings",
+        "reason": "str", "family_harm": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {"family_harm": FamilyHarm}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("worse_families",)
+    _WHAT: ClassVar[str] = "held-out test"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+
+@dataclass(frozen=True, eq=False)
+class HeldOutTests(JsonRecord):
+    """A round's held-out tests (the ``after`` step's ``significantly_worse``): against the ``start`` and against
+    the ``control`` (:class:`HeldOutWorse`; ``None``, written ``null``, when that test did not run)."""
+
+    start: Optional[HeldOutWorse] = None
+    control: Optional[HeldOutWorse] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"start": "object", "control": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {"start": HeldOutWorse, "control": HeldOutWorse}
+    _WHAT: ClassVar[str] = "held-out tests"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+
+@dataclass(frozen=True, eq=False)
+class FinalVsStart(JsonRecord):
+    """The cross-round check (:func:`dv2s_gym.loop.report.final_vs_start`): round ``rounds[1]``'s fine-tuned policy
+    (``final``) against the ``start`` on the starting bank, paired by episode over ``rounds`` (first and last
+    regression-tested round): the regression test's ``verdict`` and ``reason``, the paired ``episodes``, both
+    failure rates (``{"value", "low", "high", "count"}``), the ``difference`` with its interval, ``p_value``, the
+    ``regressed`` scenarios and the paired ``report``'s path. When the check could not be made it holds only the
+    ``error`` (why)."""
+
+    start: Optional[str] = None
+    final: Optional[str] = None
+    rounds: Optional[Tuple[int, ...]] = None
+    verdict: Optional[str] = None
+    reason: Optional[str] = None
+    episodes: Optional[int] = None
+    new_failure_rate: Optional[Mapping[str, Any]] = None
+    old_failure_rate: Optional[Mapping[str, Any]] = None
+    difference: Optional[Mapping[str, Any]] = None
+    p_value: Optional[float] = None
+    regressed: Optional[Tuple[str, ...]] = None
+    report: Optional[str] = None
+    error: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "start": "str", "final": "str", "rounds": "list", "verdict": "str", "reason": "str", "episodes": "int",
+        "new_failure_rate": "object", "old_failure_rate": "object", "difference": "object", "p_value": "number",
+        "regressed": "strings", "report": "str", "error": "str"}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("rounds", "regressed")
+    _WHAT: ClassVar[str] = "cross-round check"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        # a check that ran writes every field; one that could not be made writes only its error
+        return frozenset() if self.error is not None else frozenset(self._KINDS) - {"error"}
+
+    @classmethod
+    def failed(cls, error: str) -> "FinalVsStart":
+        """The check that could not be made, and why."""
+        return cls(error=error)
 
 
 @dataclass(frozen=True, eq=False)
@@ -572,7 +702,7 @@ class HeldOutComparison(JsonRecord):
     vs_control: Optional[VersusControl] = None
     underpowered: Optional[str] = None
     margin: Optional[float] = None
-    significantly_worse: Optional[Mapping[str, Any]] = None
+    significantly_worse: Optional[HeldOutTests] = None
     errored: Optional[Mapping[str, ErroredEpisodes]] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
@@ -587,7 +717,8 @@ class HeldOutComparison(JsonRecord):
         "errored": "object",
     }
     _NESTED: ClassVar[Dict[str, type]] = {"before": Rate, "after": Rate, "control": Rate, "table": PairedTable,
-                                          "failure_types": ArmFailureTypes, "vs_control": VersusControl}
+                                          "failure_types": ArmFailureTypes, "vs_control": VersusControl,
+                                          "significantly_worse": HeldOutTests}
     _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _LISTS: ClassVar[Tuple[str, ...]] = ("relative_drop_interval",)
     _WHAT: ClassVar[str] = "held-out comparison"
@@ -595,10 +726,12 @@ class HeldOutComparison(JsonRecord):
     def default_null_fields(self) -> FrozenSet[str]:
         return frozenset({"relative_drop", "mcnemar_p", "pairs_per_family"})
 
-    def held_out_test(self, against: str) -> Optional[Mapping[str, Any]]:
+    def held_out_test(self, against: str) -> Optional[HeldOutWorse]:
         """The recorded held-out test against ``start`` or ``control``
         (:func:`~dv2s_gym.loop.verdict.heldout_worse`; ``None`` when not tested)."""
-        return (self.significantly_worse or {}).get(against)
+        if self.significantly_worse is None or against not in ("start", "control"):
+            return None
+        return getattr(self.significantly_worse, against)
 
 
 @dataclass(frozen=True, eq=False)
@@ -650,7 +783,7 @@ class RoundRecord(JsonRecord):
     control_policy: Optional[str] = None
     next_policy: Optional[str] = None
     next_policy_reason: Optional[str] = None
-    final_vs_start: Optional[Mapping[str, Any]] = None
+    final_vs_start: Optional[FinalVsStart] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -658,7 +791,7 @@ class RoundRecord(JsonRecord):
                                         "new_policy": "str", "control_policy": "str", "next_policy": "str",
                                         "next_policy_reason": "str", "final_vs_start": "object"}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("round",)
-    _NESTED: ClassVar[Dict[str, type]] = {"steps": RoundSteps}
+    _NESTED: ClassVar[Dict[str, type]] = {"steps": RoundSteps, "final_vs_start": FinalVsStart}
     _WHAT: ClassVar[str] = "round"
 
     @classmethod
@@ -681,7 +814,7 @@ class RoundRecord(JsonRecord):
         could be made over the rounds up to it)."""
         return self.final_vs_start is not None or "final_vs_start" in (self.null_fields or ())
 
-    def with_cross_round_check(self, checked: Optional[Mapping[str, Any]]) -> "RoundRecord":
+    def with_cross_round_check(self, checked: Optional[FinalVsStart]) -> "RoundRecord":
         """A copy recording its cross-round check ``checked`` (``None``: written as ``null``, no check could be
         made)."""
         nulls = self.default_null_fields() if self.null_fields is None else self.null_fields

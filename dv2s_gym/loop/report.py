@@ -102,8 +102,8 @@ from dv2s_gym.mining.conversion.files import CONVERSION_DIR, ENTRY_CONVERTED_VID
 from dv2s_gym.mining.conversion.record import ConversionStatus
 from dv2s_gym.loop.errored import merged_messages, messages_text
 from dv2s_gym.loop.record import (
-    ControlTable, ErroredEpisodes, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, Rate, ReferenceGate, RegressSummary,
-    RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
+    ControlTable, ErroredEpisodes, FinalVsStart, HeldOutComparison, MinedEntry, MiningSummary, PairedTable, ReferenceGate, RegressSummary,
+    RoundRecord, RoundSteps, SplitRecord, UntouchedComparison, recorded)
 from dv2s_gym.mining.report_text import by_type_text, clip_caption
 from dv2s_gym.loop.verdict import (ACCEPTED, HELDOUT_ALPHA, Recommendation, evidence_floor_note,
                                          judge_round, recommendation)
@@ -112,6 +112,7 @@ from dv2s_gym.regress.report import build_report, load_report, write_json
 from html import escape
 from pathlib import Path
 from policies.card_record import FineTuneMethod
+from policies.stats import Rate
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.entries import SIDECAR, read_json
 from typing import Any, Dict, List, Mapping, Optional
@@ -156,7 +157,7 @@ def _regress_report_path(stored: str, folder: Optional[Path]) -> Path:
 
 
 def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
-                   folder: Optional[Path] = None) -> Optional[Dict[str, Any]]:
+                   folder: Optional[Path] = None) -> Optional[FinalVsStart]:
     """The final policy against the starting policy on the starting bank, from the rounds' regression reports.
 
     ``None`` unless two or more rounds finished their regression test. The first tested round's baseline
@@ -164,7 +165,8 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
     (the final policy) ran the same scenarios and seeds; their episodes are paired by id and judged as
     ``dv2s regress`` does (:func:`dv2s_gym.regress.report.build_report`). With ``out`` the paired report is
     written to ``out/final_vs_start/report.json``. A report that cannot be read, or a starting-bank scenario
-    that changed between the rounds, gives ``{"error": reason}`` instead (and the verdict is then NOT ACCEPTED).
+    that changed between the rounds, gives a record holding only its ``error`` instead (and the verdict is then NOT
+    ACCEPTED).
     ``folder``: the loop folder the reports are read from (default ``out``; see :func:`_regress_report_path`).
     """
     tested = [r for r in _rounds(report) if r.steps.regress is not None and r.steps.regress.report]
@@ -176,38 +178,40 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
         start = load_report(_regress_report_path(first.steps.regress.report, folder))
         final = load_report(_regress_report_path(last.steps.regress.report, folder))
     except Exception as error:  # noqa: BLE001 - a missing or foreign report is a line of the loop report
-        return {"error": f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}"}
-    start_bank, final_bank = start.bank or BankInfo(), final.bank or BankInfo()
+        return FinalVsStart.failed(f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}")
+    start_bank = start.bank if start.bank is not None else BankInfo()
+    final_bank = final.bank if final.bank is not None else BankInfo()
     names = list(start_bank.scenarios or ())
     hashes = [start_bank.hashes or {}, final_bank.hashes or {}]
     changed = [n for n in names if hashes[0].get(n) != hashes[1].get(n)]
     if changed or names != list(final_bank.scenarios or ()):
-        return {"error": f"the starting bank differs between round {first.round} and round "
-                         f"{last.round} ({', '.join(changed[:3]) or 'scenario list'}); no paired comparison"}
+        return FinalVsStart.failed(f"the starting bank differs between round {first.round} and round "
+                                   f"{last.round} ({', '.join(changed[:3]) or 'scenario list'}); no paired comparison")
     baseline = {e.id: e.baseline for e in start.episodes or ()}
     episodes = [PairedEpisode(id=e.id, scenario=e.scenario, seed=e.seed, candidate=e.candidate,
                               baseline=baseline[e.id])
                 for e in final.episodes or () if baseline.get(e.id) is not None]
     if not episodes:
-        return {"error": f"round {first.round} and round {last.round} share no regression episode"}
+        return FinalVsStart.failed(f"round {first.round} and round {last.round} share no regression episode")
     paired = build_report(bank=final.bank, settings=final.settings, candidate=final.candidate,
                           baseline=start.baseline, episodes=episodes)
     path = None
     if out is not None:
         path = write_json(paired, Path(out) / FINAL_VS_START_DIR / "report.json")
     overall = paired.overall
-    comparison = overall.comparison or PairedComparison()
+    comparison = overall.comparison if overall.comparison is not None else PairedComparison()
 
     def failure_rate(summary: Optional[Summary]) -> Optional[Mapping[str, Any]]:
         return summary.failure_rate if summary is not None else None
 
-    return {"start": start.baseline.spec if start.baseline else None,
-            "final": final.candidate.spec if final.candidate else None,
-            "rounds": [first.round, last.round], "verdict": paired.verdict,
-            "reason": comparison.reason, "episodes": comparison.n,
-            "new_failure_rate": failure_rate(overall.candidate), "old_failure_rate": failure_rate(overall.baseline),
-            "difference": comparison.difference, "p_value": comparison.p_value,
-            "regressed": list(paired.regressed or ()), "report": str(path) if path is not None else None}
+    return FinalVsStart(start=start.baseline.spec if start.baseline is not None else None,
+                        final=final.candidate.spec if final.candidate is not None else None,
+                        rounds=(first.round, last.round), verdict=paired.verdict,
+                        reason=comparison.reason, episodes=comparison.n,
+                        new_failure_rate=failure_rate(overall.candidate),
+                        old_failure_rate=failure_rate(overall.baseline),
+                        difference=comparison.difference, p_value=comparison.p_value,
+                        regressed=tuple(paired.regressed or ()), report=str(path) if path is not None else None)
 
 
 def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = None,
@@ -219,33 +223,39 @@ def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = Non
     rounds = _rounds(report)
     for index, record in enumerate(rounds):
         judged = judge_round(record)
-        if judged is not None and judged["verdict"] == ACCEPTED and not record.cross_round_checked:
+        if judged is not None and judged.verdict == ACCEPTED and not record.cross_round_checked:
             checked = final_vs_start({"rounds": rounds[:index + 1]}, folder=folder or out)
             rounds[index] = record.with_cross_round_check(checked)
     body = {**report, "rounds": [record.to_dict() for record in rounds]}
     if "final_vs_start" not in body:
         final = final_vs_start(body, out, folder)
         if final is not None:
-            body["final_vs_start"] = final
+            body["final_vs_start"] = final.to_dict()
     return body
 
 
-def _final_line(final: Optional[Mapping[str, Any]]) -> Optional[str]:
+def _final_line(final: Optional[FinalVsStart]) -> Optional[str]:
     """One sentence on the last fine-tuned policy against the starting one (None when there is no such
     comparison)."""
-    if not final:
+    if final is None:
         return None
-    if final.get("error"):
-        return f"Fine-tuned policy against the starting policy on the starting bank: not compared ({final['error']})."
-    rounds = final.get("rounds") or ["?", "?"]
-    return (f"Round {rounds[1]}'s fine-tuned policy `{final.get('final')}` against the starting policy "
-            f"`{final.get('start')}` on the starting "
-            f"bank ({final.get('episodes')} paired episodes: round {rounds[0]}'s baseline episodes with round "
-            f"{rounds[1]}'s candidate episodes, same scenarios and seeds): **{final.get('verdict')}** - "
-            f"{final.get('reason')}; failure rate fine-tuned {_summary_rate(final.get('new_failure_rate'))}, start "
-            f"{_summary_rate(final.get('old_failure_rate'))}"
-            + (f"; regressed: {', '.join(final['regressed'])}" if final.get("regressed") else "")
-            + (f"; report `{final['report']}`" if final.get("report") else "") + ".")
+    if final.error:
+        return f"Fine-tuned policy against the starting policy on the starting bank: not compared ({final.error})."
+    rounds = final.rounds or ("?", "?")
+    return (f"Round {rounds[1]}'s fine-tuned policy `{final.final}` against the starting policy "
+            f"`{final.start}` on the starting "
+            f"bank ({final.episodes} paired episodes: round {rounds[0]}'s baseline episodes with round "
+            f"{rounds[1]}'s candidate episodes, same scenarios and seeds): **{final.verdict}** - "
+            f"{final.reason}; failure rate fine-tuned {_summary_rate(final.new_failure_rate)}, start "
+            f"{_summary_rate(final.old_failure_rate)}"
+            + (f"; regressed: {', '.join(final.regressed)}" if final.regressed else "")
+            + (f"; report `{final.report}`" if final.report else "") + ".")
+
+
+def _report_final(report: Mapping[str, Any]) -> Optional[FinalVsStart]:
+    """The report's own cross-round check (``final_vs_start``), read into its record; ``None`` without one."""
+    found = report.get("final_vs_start")
+    return None if found is None else FinalVsStart.from_dict(found)
 
 
 _ORDER = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
@@ -264,9 +274,9 @@ def _rounds(report: Mapping[str, Any]) -> List[RoundRecord]:
 def _round_row(record: RoundRecord) -> Dict[str, Any]:
     """The cells of a round's line in the summary tables (Markdown and HTML)."""
     steps = record.steps
-    mine, split = steps.mine, steps.split or SplitRecord()
-    regress = steps.regress or RegressSummary()
-    after = steps.after or HeldOutComparison()
+    mine, split = steps.mine, steps.split if steps.split is not None else SplitRecord()
+    regress = steps.regress if steps.regress is not None else RegressSummary()
+    after = steps.after if steps.after is not None else HeldOutComparison()
     drop = after.relative_drop
     interval = after.relative_drop_interval or [None, None]
     drop_text = "-" if drop is None else f"{drop:.0%}" + (
@@ -281,7 +291,7 @@ def _round_row(record: RoundRecord) -> Dict[str, Any]:
     p_value = after.mcnemar_p
     p_control = None if after.vs_control is None else after.vs_control.mcnemar_p
     return {
-        "control": rate_text(after.control) if after.control else "-",
+        "control": rate_text(after.control) if recorded(after.control) else "-",
         "p_control": "-" if p_control is None else f"{p_control:.3g}",
         "untouched": _untouched_cell(steps.untouched),
         "round": record.round, "failures": _recorded(mine, "failures"),
@@ -310,7 +320,7 @@ def errored_text(errored: Mapping[str, Optional[ErroredEpisodes]]) -> str:
     labels = {"start": "starting policy ", "fine_tuned": "fine-tuned policy ", "control": "control ", "mine": ""}
     parts = []
     for role, found in errored.items():
-        if found and found.episodes:
+        if found is not None and found.episodes:
             names = ", ".join(f"{name} {count}" for name, count in (found.scenarios or {}).items())
             parts.append(f"{labels.get(role, role + ' ')}{found.episodes}" + (f" ({names})" if names else ""))
     return ", ".join(parts)
@@ -347,7 +357,8 @@ def errored_by_stage(record: RoundRecord) -> List[tuple]:
 
 
 def _errored_total(record: RoundRecord) -> int:
-    return sum(int(found.episodes or 0) for _, by in errored_by_stage(record) for found in by.values() if found)
+    return sum(int(found.episodes or 0) for _, by in errored_by_stage(record) for found in by.values()
+               if found is not None)
 
 
 def _errored_lines(record: RoundRecord) -> List[str]:
@@ -362,7 +373,7 @@ def _errored_lines(record: RoundRecord) -> List[str]:
     lines = [f"- errored episodes (counted in no rate or test): " + ("**" if total else "") + "; ".join(parts)
              + ("**" if total else "")]
 
-    merged = merged_messages([found for _, by in stages for found in by.values() if found])
+    merged = merged_messages([found for _, by in stages for found in by.values() if recorded(found)])
     lines += [f"  - `{name}`: {messages_text(merged, name)}" for name in merged]
     return lines
 
@@ -398,7 +409,7 @@ def _share(summary: Optional[Mapping[str, Any]], key: str) -> str:
 
 def _untouched_cell(untouched: Optional[UntouchedComparison]) -> str:
     """Failure rates start / control / fine-tuned on the untouched set, one cell."""
-    if not untouched:
+    if not recorded(untouched):
         return "-"
     policies = untouched.policies or {}
     return " / ".join(_share(policies.get(role), "failure_rate") for role in ("start", "control", "fine_tuned"))
@@ -406,7 +417,7 @@ def _untouched_cell(untouched: Optional[UntouchedComparison]) -> str:
 
 def _untouched_lines(untouched: Optional[UntouchedComparison]) -> List[str]:
     """The untouched set's table (Markdown) and its two comparisons."""
-    if not untouched:
+    if not recorded(untouched):
         return []
     policies = untouched.policies or {}
     lines = [f"- untouched scenario set ({len(untouched.scenarios or ())} scripts written by others for "
@@ -428,7 +439,7 @@ def _untouched_lines(untouched: Optional[UntouchedComparison]) -> List[str]:
         lines.append(f"- **WARNING: {vacuous}**")
     for comparison, label in ((untouched.fine_tuned_vs_start, "fine-tuned against start"),
                               (untouched.control_vs_fine_tuned, "control against fine-tuned")):
-        if comparison:
+        if recorded(comparison):
             lines.append(f"- untouched, {label}: **{comparison.verdict}** - {comparison.reason}; "
                          f"report `{comparison.report}`")
     return lines
@@ -467,7 +478,7 @@ def reference_gate_text(gate: ReferenceGate) -> str:
 def _reference_lines(gate: Optional[ReferenceGate]) -> List[str]:
     """The reference driver's pass over the held-out episodes: how many it did not pass, left out of every rate
     and test (loop.reference_gate)."""
-    if not gate:
+    if not recorded(gate):
         return []
     text = reference_gate_text(gate)
     return [f"- held-out episodes the reference driver does not pass: " + (f"**{text}**" if gate.excluded
@@ -476,17 +487,17 @@ def _reference_lines(gate: Optional[ReferenceGate]) -> List[str]:
 
 def _heldout_lines(after: Optional[HeldOutComparison]) -> List[str]:
     """The held-out comparison: start, control, fine-tuned, and what is (not) reported."""
-    if not after:
+    if not recorded(after):
         return []
     lines = []
     if after.underpowered:
         lines.append(f"- **WARNING: {after.underpowered}**")
     if not after.pairs:
         return lines + [f"- held-out episodes: none ran ({0 if after.errors is None else after.errors} with errors)"]
-    table = after.table or PairedTable()
+    table = after.table if after.table is not None else PairedTable()
     lines.append(f"- held-out episodes: {after.pairs} pairs{_sources_text(after)} ({after.errors} with "
                  f"errors left out); start {rate_text(after.before)}"
-                 + (f", control {rate_text(after.control)}" if after.control else "")
+                 + (f", control {rate_text(after.control)}" if recorded(after.control) else "")
                  + f", fine-tuned {rate_text(after.after)}; paired fine-tuned vs start: both failed "
                  f"{table.both_fail}, only start {table.before_only}, only fine-tuned "
                  f"{table.after_only}, neither {table.neither}"
@@ -495,14 +506,14 @@ def _heldout_lines(after: Optional[HeldOutComparison]) -> List[str]:
     if dependence:
         lines.append(dependence)
     kinds = after.failure_types
-    if kinds:
+    if recorded(kinds):
         lines.append("- held-out failures by type: " + "; ".join(
             f"{label} {by_type_text(getattr(kinds, role))}"
             for role, label in (("start", "start"), ("control", "control"), ("fine_tuned", "fine-tuned"))
             if getattr(kinds, role) is not None))
     versus = after.vs_control
-    if versus:
-        table = versus.table or ControlTable()
+    if recorded(versus):
+        table = versus.table if versus.table is not None else ControlTable()
         lines.append(f"- paired fine-tuned vs control: both failed {table.both_fail}, only control "
                      f"{table.control_only}, only fine-tuned {table.fine_tuned_only}, neither "
                      f"{table.neither}"
@@ -513,26 +524,25 @@ def _heldout_lines(after: Optional[HeldOutComparison]) -> List[str]:
         lines.append("- no control arm in this round: a drop cannot be credited to the mined scenarios")
     for key, label in (("start", "the starting policy"), ("control", "the control")):
         test = after.held_out_test(key)
-        if test:
+        if test is not None:
             lines.append(f"- fine-tuned policy against {label} on the held-out families: "
-                         f"**{'significantly worse' if test.get('worse') else 'not significantly worse'}** "
-                         f"({test.get('reason')}; {test.get('test')})")
-            harm = test.get("family_harm")
-            if harm:
-                rows = harm.get("families") or {}
+                         f"**{'significantly worse' if test.worse else 'not significantly worse'}** "
+                         f"({test.reason}; {test.test})")
+            harm = test.family_harm
+            if harm is not None:
                 lines.append(f"- held-out families against {label}, harm rule at the margin "
-                             f"{100 * harm['margin']:+.1f} pp (a family whose difference is worse blocks ACCEPTED): "
-                             + ("**harm not ruled out in " + ", ".join(harm["harmed"]) + "**; " if harm["harmed"]
+                             f"{100 * harm.margin:+.1f} pp (a family whose difference is worse blocks ACCEPTED): "
+                             + ("**harm not ruled out in " + ", ".join(harm.harmed) + "**; " if harm.harmed
                                 else "no family worse by more than the margin; ")
                              + "per family the difference (95% CI; non-inferiority at the margin, Holm over the "
                              f"families at one-sided {HELDOUT_ALPHA / 2:g}, evidence only): "
-                             + "; ".join(f"{name} {100 * row['difference']:+.1f} pp (95% CI "
-                                         f"{100 * row['interval'][0]:+.1f} to {100 * row['interval'][1]:+.1f}; "
-                                         f"{'non-inferior' if row['non_inferior'] else 'not shown'})"
-                                         for name, row in rows.items()))
+                             + "; ".join(f"{name} {100 * row.difference:+.1f} pp (95% CI "
+                                         f"{100 * row.interval[0]:+.1f} to {100 * row.interval[1]:+.1f}; "
+                                         f"{'non-inferior' if row.non_inferior else 'not shown'})"
+                                         for name, row in harm.families.items()))
     per = after.per_scenario or {}
     if per:
-        controls = (versus.per_scenario if versus else None) or {}
+        controls = (versus.per_scenario if versus is not None else None) or {}
         lines += ["", "| held-out scenario | episodes | failed: start | control | fine-tuned |", "|---|---|---|---|---|"]
         lines += [f"| {name} | {row['n']} | {row['before']} | {controls.get(name, '-')} | {row['after']} |"
                   for name, row in per.items()]
@@ -626,7 +636,7 @@ def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
             f"| {row['round']} | {row['failures']} ({row['against']}) / {row['episodes']} | {row['clusters']} | "
             f"{row['kept']} | {row['split']} | {row['before']} | {row['control']} | {row['after']} | {row['drop']} | "
             f"{row['p']} | {row['p_control']} | {row['untouched']} | {row['verdict']} |")
-    final_line = _final_line(report.get("final_vs_start"))
+    final_line = _final_line(_report_final(report))
     if final_line:
         lines += ["", final_line]
     return lines
@@ -635,7 +645,7 @@ def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
 def _mining_lines(mine: Optional[MiningSummary], settings: Mapping[str, Any]) -> List[str]:
     """A round's mining step: what was found, converted and kept, and every reason a conversion was rejected (a
     JSON object of one is read as a :class:`~dv2s_gym.loop.record.MiningSummary`)."""
-    if not mine:
+    if not recorded(mine):
         return []
     mine = MiningSummary.from_dict(mine)
     lines = [f"- mining ({mine.folder}): {mine.episodes} episodes, {mine.failures} "
@@ -670,7 +680,7 @@ def _mining_lines(mine: Optional[MiningSummary], settings: Mapping[str, Any]) ->
 
 def _split_lines(split: Optional[SplitRecord]) -> List[str]:
     """A round's split of the mined scenarios into fine-tuning and held-out families."""
-    if not split:
+    if not recorded(split):
         return []
     return [f"- split by family ({split.groups} family groups): fine-tune families "
             f"{', '.join(split.fine_tune_family_names) or 'none'} "
@@ -683,7 +693,7 @@ def _fine_tuning_lines(steps: RoundSteps) -> List[str]:
     """A round's fine-tuning (by PPO or DAgger) and its control arm, one line each."""
     lines = []
     for key, tuned in (("fine_tune", steps.fine_tune), ("control", steps.control)):
-        if not tuned:
+        if not recorded(tuned):
             continue
         if key == "control":
             lines.append(f"- control arm: the same fine-tuning ({tuned.method}, {tuned.steps} "
@@ -711,7 +721,7 @@ def _fine_tuning_lines(steps: RoundSteps) -> List[str]:
 
 def _regression_lines(regress: Optional[RegressSummary]) -> List[str]:
     """A round's regression test on the starting bank, and the held-out families' parents in it."""
-    if not regress:
+    if not recorded(regress):
         return []
     lines = [f"- regression test on the starting bank ({regress.episodes} paired episodes): "
              f"**{regress.verdict}** - {regress.reason}; failure rate new "
@@ -870,7 +880,7 @@ def _rates_svg(title: str, bars: List[tuple]) -> str:
 def _round_figures(record: RoundRecord) -> str:
     """The round's failure rates as charts: held-out (start, control, fine-tuned) and untouched."""
     steps = record.steps
-    after = steps.after or HeldOutComparison()
+    after = steps.after if steps.after is not None else HeldOutComparison()
     held = [(label, rate.rate, rate.low, rate.high) if rate is not None else (label, None, None, None)
             for label, rate in (("start", after.before), ("control", after.control), ("fine-tuned", after.after))]
     policies = (steps.untouched.policies if steps.untouched is not None else None) or {}
@@ -899,7 +909,7 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
                  row["untouched"]]
         row = "".join(f"<td>{escape(str(c))}</td>" for c in cells)
         rows.append(f"<tr>{row}<td class=\"{escape(str(verdict))}\">{escape(str(verdict))}</td></tr>")
-    final_line = _final_line(report.get("final_vs_start"))
+    final_line = _final_line(_report_final(report))
     final_html = f"<p>{escape(final_line).replace('**', '')}</p>" if final_line else ""
     head = ("<tr><th>round</th><th>failures / episodes mined</th><th>clusters</th><th>kept</th>"
             "<th>fine-tune / held-out</th><th>held-out failure rate: start</th><th>control</th><th>fine-tuned</th>"
@@ -951,9 +961,9 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
     bank = Path(settings.get("bank_dir") or Path(out) / "bank")
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
     for record in _rounds(report):
-        mine = record.steps.mine or MiningSummary()
+        mine = record.steps.mine if record.steps.mine is not None else MiningSummary()
         policy = record.policy or report.get("policy")
-        split = record.steps.split or SplitRecord()
+        split = record.steps.split if record.steps.split is not None else SplitRecord()
         held = set(split.held_out_scenarios)
         clips: Dict[str, List[Dict[str, str]]] = {}
         for entry in mine.kept_entries:

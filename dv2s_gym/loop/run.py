@@ -81,9 +81,9 @@ from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.loop.heldout import episode_failed, failure_types, HeldOutStore, paired_summary
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.loop.record import (
-    ErroredEpisodes, FineTuneArm, HeldOutBefore, HeldOutComparison, LoopStart, MinedEntry, MiningSummary,
+    ErroredEpisodes, FineTuneArm, HeldOutBefore, HeldOutComparison, HeldOutTests, LoopStart, MinedEntry, MiningSummary,
     RecordedLoopSettings, ReferenceGate, RegressComparison, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
-    UntouchedComparison)
+    UntouchedComparison, recorded)
 from dv2s_gym.loop.report import (errored_note, errored_text, rate_text, reference_gate_text,
                                          write_loop_reports)
 from dv2s_gym.loop.settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
@@ -102,7 +102,7 @@ from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
-from scenario_bank.records import EpisodeRecord, RecordError
+from scenario_bank.records import EpisodeRecord, HeldOutEpisode, RecordError
 from scenario_bank.run_identity import check_format, check_identity, record_format
 from policies.evaluation import EVAL_SEED_BASE
 from policies.card_record import FineTune, FineTuneMethod
@@ -404,7 +404,7 @@ def _regress_errored(report: Mapping[str, Any], roles: Mapping[str, str]) -> Dic
     report = RegressReport.from_json(report)
     found: Dict[str, Dict[str, Any]] = {}
     for role, name in roles.items():
-        found[name] = errored_episodes([{"scenario": e.scenario, "error": e.result(role).get("error")}
+        found[name] = errored_episodes([{"scenario": e.scenario, "error": e.result(role).error}
                                         for e in report.episodes or () if e.result(role) is not None])
     return found
 
@@ -439,16 +439,16 @@ def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[st
     """The regression step's record; ``parents``: scenarios whose own results are kept apart (the held-out
     families' parents, never fine-tuned on: the regression test's view beyond the fine-tuning mix)."""
     report = RegressReport.from_json(report)
-    overall = report.overall or ScenarioResult()
+    overall = report.overall if report.overall is not None else ScenarioResult()
     per_scenario = report.scenarios or {}
-    comparison = overall.comparison or PairedComparison()
+    comparison = overall.comparison if overall.comparison is not None else PairedComparison()
 
     def rate(role: str) -> Optional[Mapping[str, Any]]:
         summary = overall.summary(role)
         return summary.failure_rate if summary is not None else None
 
     def measures(summary: Optional[Summary]) -> Dict[str, Any]:
-        summary = summary or Summary()
+        summary = summary if summary is not None else Summary()
         return {"failure_rate": summary.failure_rate, "stall_rate": summary.rate("stall"),
                 "mean_speed": summary.mean_speed}
 
@@ -579,7 +579,7 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
     """Run (or finish) round ``number`` from policy ``current``; the policy the next round starts from."""
     record = loop.state.round(number)
     steps = record.steps
-    if steps and record.policy not in (None, current):
+    if recorded(steps) and record.policy not in (None, current):
         raise LoopError(f"round {number} in {loop.out / 'loop.json'} was begun from {record.policy}, not from "
                         f"{current}, the policy the rounds before it recommend; choose another --out")
     if "policy" not in record:
@@ -705,7 +705,7 @@ def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Opt
     text = errored_text(errored)
     if not text:
         return
-    merged = merged_messages([found for found in errored.values() if found])
+    merged = merged_messages([found for found in errored.values() if recorded(found)])
     loop.log(f"round {number}: WARNING: episodes that errored in the {stage} step (left out of its rates and "
              f"tests): {text}" + "".join(f"; {name}: {messages_text(merged, name)}" for name in merged))
 
@@ -802,7 +802,7 @@ miner's settings so that importing the loop does not load torch). The held-out e
 passes (:func:`reference_gate`)."""
 
 
-def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, str]) -> ReferenceGate:
+def reference_gate(records: Sequence[HeldOutEpisode], families: Mapping[str, str]) -> ReferenceGate:
     """The ``reference`` step's record from the reference driver's held-out ``records``: which held-out episodes
     the loop leaves out because the reference driver did not pass them (it failed, by the miner's monitors, or the
     episode errored, so that nobody knows), counted and named, never dropped silently.
@@ -816,7 +816,7 @@ def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, 
     excluded, failed, errored = [], 0, 0
     kept_families, all_families = set(), set()
     for record in records:
-        name, seed = str(record["scenario"]), int(record["seed"])
+        name, seed = str(record.scenario), int(record.seed)
         row = by_scenario.setdefault(name, {"episodes": 0, "excluded": 0, "failures": {}})
         row["episodes"] += 1
         family = families.get(name, name)
@@ -832,7 +832,7 @@ def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, 
             kind = "error"
         else:
             failed += 1
-            kind = str((record.get("failure") or {}).get("type") or "failure")
+            kind = str((record.failure or {}).get("type") or "failure")
         row["failures"][kind] = row["failures"].get(kind, 0) + 1
     return ReferenceGate(reference=REFERENCE_DRIVER, episodes=len(records), kept=len(records) - len(excluded),
                          excluded=tuple(excluded), failed=failed, errored=errored,
@@ -861,7 +861,7 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
     s, split = loop.settings, timed.steps.split
     excluded = set(split.held_out_scenarios) | set(split.held_out_family_names)
     for earlier in loop.state.rounds[:number - 1]:
-        earlier_split = earlier.steps.split or SplitRecord()
+        earlier_split = earlier.steps.split if earlier.steps.split is not None else SplitRecord()
         excluded.update(earlier_split.held_out_scenarios)
         excluded.update(earlier_split.held_out_family_names)
     arm = _Arm(bank=loop.bank, method=s.fine_tune_method, steps=s.fine_tune_steps, seed=s.seed * 1000 + number,
@@ -1037,8 +1037,8 @@ def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, l
                        resumed=tuple(dagger.resumed or ()))
 
 
-def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]],
-                       control: Optional[Sequence[Mapping[str, Any]]], *, min_episodes: int,
+def heldout_comparison(before: Sequence[HeldOutEpisode], after: Sequence[HeldOutEpisode],
+                       control: Optional[Sequence[HeldOutEpisode]], *, min_episodes: int,
                        seed: int = 0, families: Optional[Mapping[str, str]] = None,
                        min_families: int = 0, margin: Optional[float] = None) -> HeldOutComparison:
     """The ``after`` step (a :class:`~dv2s_gym.loop.record.HeldOutComparison`):
@@ -1055,7 +1055,7 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     (:func:`dv2s_gym.loop.verdict.heldout_worse`, the verdict's held-out tests; ``None`` when not tested:
     below the minimums, or no control), each with its held-out families' harm rule at ``margin`` (default: the
     loop's default margin; :func:`dv2s_gym.loop.verdict.family_harm`)."""
-    scenarios = sorted({str(r["scenario"]) for r in before})
+    scenarios = sorted({str(r.scenario) for r in before})
     # the drop's interval resamples families, the unit the split holds out (scenarios of one family are not
     # independent); a scenario without a family stands for itself
     summary = paired_summary(before, after, seed=seed,
@@ -1064,7 +1064,7 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     summary["heldout_scenarios"] = len(scenarios)
     # a family counts only with a tested pair (no error on either side) in each held-out test: one whose episodes
     # all errored tests nothing, so it never makes a round large enough to judge
-    def tested_families(baseline: Sequence[Mapping[str, Any]]) -> set:
+    def tested_families(baseline: Sequence[HeldOutEpisode]) -> set:
         return {family for family, table in _family_tables(baseline, after, families).items() if table.n}
 
     tested = tested_families(before)
@@ -1101,11 +1101,11 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
 
     margin = DEFAULTS["margin"] if margin is None else float(margin)
     summary["margin"] = margin
-    summary["significantly_worse"] = {
-        "start": None if shortfall else heldout_worse(_family_tables(before, after, families), "start", margin),
-        "control": None if shortfall or control_shortfall or control is None else heldout_worse(
-            _family_tables(control, after, families), "control", margin)}
-    return HeldOutComparison.from_dict(summary)
+    tests = HeldOutTests(
+        start=None if shortfall else heldout_worse(_family_tables(before, after, families), "start", margin),
+        control=None if shortfall or control_shortfall or control is None else heldout_worse(
+            _family_tables(control, after, families), "control", margin))
+    return HeldOutComparison.from_dict(summary).replace(significantly_worse=tests)
 
 
 def _control_shortfall(pairs: int, families: set, min_episodes: int, min_families: int) -> Optional[str]:
@@ -1115,18 +1115,18 @@ def _control_shortfall(pairs: int, families: set, min_episodes: int, min_familie
     return None if shortfall is None else "against the control: " + shortfall
 
 
-def _family_tables(baseline: Sequence[Mapping[str, Any]], candidate: Sequence[Mapping[str, Any]],
+def _family_tables(baseline: Sequence[HeldOutEpisode], candidate: Sequence[HeldOutEpisode],
                    families: Optional[Mapping[str, str]]) -> Dict[str, Any]:
     """``{held-out family: PairedTable}`` of ``candidate`` against ``baseline`` records, paired by (scenario, seed);
     a pair with an error on either side is left out."""
-    twins = {(r["scenario"], int(r["seed"])): r for r in candidate}
+    twins = {(r.scenario, int(r.seed)): r for r in candidate}
     outcomes: Dict[str, tuple] = {}
     for record in baseline:
-        twin = twins.get((record["scenario"], int(record["seed"])))
+        twin = twins.get((record.scenario, int(record.seed)))
         old, new = episode_failed(record), episode_failed(twin) if twin is not None else None
         if old is None or new is None:
             continue
-        family = (families or {}).get(str(record["scenario"]), str(record["scenario"]))
+        family = (families or {}).get(str(record.scenario), str(record.scenario))
         pair = outcomes.setdefault(family, ([], []))
         pair[0].append(new)
         pair[1].append(old)
@@ -1151,9 +1151,9 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
     first = RegressReport.from_json(runner.run_regression(fine_tuned, start, settings,
                                                           workers=WorkerSettings(workers=workers),
                                                           out_dir=out / "vs_start", progress=progress))
-    overall = first.overall or ScenarioResult()
+    overall = first.overall if first.overall is not None else ScenarioResult()
     policies = {"start": _measures(overall.baseline), "fine_tuned": _measures(overall.candidate)}
-    result = UntouchedComparison(scenarios=tuple((first.bank.scenarios if first.bank else None) or ()),
+    result = UntouchedComparison(scenarios=tuple((first.bank.scenarios if first.bank is not None else None) or ()),
                                  seeds=settings.episodes, policies=policies,
                                  fine_tuned_vs_start=_comparison(first, out / "vs_start" / "report.json"),
                                  errored=_regress_errored(first, {"baseline": "start", "candidate": "fine_tuned"}))
@@ -1164,21 +1164,23 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
                                                                workers=WorkerSettings(workers=workers),
                                                                out_dir=out / "vs_control", progress=progress))
         result = result.replace(
-            policies={**policies, "control": _measures(second.overall.candidate if second.overall else None)},
+            policies={**policies,
+                      "control": _measures(second.overall.candidate if second.overall is not None else None)},
             control_vs_fine_tuned=_comparison(second, out / "vs_control" / "report.json"),
             errored={**result.errored, **_regress_errored(second, {"candidate": "control"})})
     return result
 
 
 def _measures(summary: Optional[Summary]) -> Dict[str, Any]:
-    summary = summary or Summary()
+    summary = summary if summary is not None else Summary()
     return {"episodes": summary.episodes, "errors": summary.errors,
             "failure_rate": summary.failure_rate, "stall_rate": summary.rate("stall"),
             "collision_rate": summary.rate("collision"), "mean_speed": summary.mean_speed}
 
 
 def _comparison(report: RegressReport, path: Path) -> RegressComparison:
-    comparison = (report.overall.comparison if report.overall else None) or PairedComparison()
+    overall = report.overall if report.overall is not None else ScenarioResult()
+    comparison = overall.comparison if overall.comparison is not None else PairedComparison()
     return RegressComparison(verdict=report.verdict, reason=comparison.reason, episodes=comparison.n,
                              difference=comparison.difference, p_value=comparison.p_value,
                              report=str(Path(path).resolve()))
@@ -1208,11 +1210,11 @@ def _earlier_sides(rounds: Sequence[RoundRecord]) -> tuple:
     held: set = set()
     tuned: set = set()
     for earlier in rounds:
-        split = earlier.steps.split or SplitRecord()
+        split = earlier.steps.split if earlier.steps.split is not None else SplitRecord()
         held.update(split.held_out_family_names)
         tuned.update(split.fine_tune_family_names)
         for arm in (earlier.steps.fine_tune, earlier.steps.control):
-            tuned.update((arm or FineTuneArm()).families or ())
+            tuned.update((arm.families if arm is not None else None) or ())
     return sorted(held), sorted(tuned)
 
 
@@ -1233,9 +1235,9 @@ def _with_parents(kept: Sequence[MinedEntry], bank: Optional[str]) -> List[Mined
 def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> None:
     after = steps.after
 
-    if after:
+    if recorded(after):
         line = (f"round {number}: held-out failure rate start {rate_text(after.before)}, "
-                + (f"control {rate_text(after.control)}, " if after.control else "")
+                + (f"control {rate_text(after.control)}, " if recorded(after.control) else "")
                 + f"fine-tuned {rate_text(after.after)}")
         if after.underpowered:
             log(line + f"; NO DROP OR TEST REPORTED: {after.underpowered}")
@@ -1243,9 +1245,10 @@ def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> No
             drop, versus = after.relative_drop, after.vs_control
             log(line + (f", relative drop {drop:.0%}" if drop is not None else "")
                 + (f", McNemar p (two-sided) vs start = {after.mcnemar_p:.3g}" if after.mcnemar_p is not None else "")
-                + (f", vs control = {versus.mcnemar_p:.3g}" if versus and versus.mcnemar_p is not None else ""))
+                + (f", vs control = {versus.mcnemar_p:.3g}"
+                   if versus is not None and versus.mcnemar_p is not None else ""))
     untouched = steps.untouched
-    if untouched:
+    if recorded(untouched):
         def share(role: str) -> str:
             value = untouched.failure_rate(role)
             return "-" if value is None else f"{value:.2f}"
@@ -1253,9 +1256,9 @@ def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> No
         vacuous = untouched.vacuous()
         log(f"round {number}: untouched set failure rate start {share('start')}, control {share('control')}, "
             f"fine-tuned {share('fine_tuned')}; fine-tuned vs start "
-            f"{(untouched.fine_tuned_vs_start or RegressComparison()).verdict}"
+            f"{(untouched.fine_tuned_vs_start.verdict if untouched.fine_tuned_vs_start is not None else None)}"
             + (f"; WARNING: {vacuous}" if vacuous else ""))
-    regress = steps.regress or RegressSummary()
+    regress = steps.regress if steps.regress is not None else RegressSummary()
     log(f"round {number}: rest of the bank: {regress.verdict} ({regress.reason})")
 
 

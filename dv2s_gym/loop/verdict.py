@@ -31,15 +31,19 @@ recommendation back to the starting policy, so it is never the policy to use.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Dict, Mapping, Optional
+from typing import TYPE_CHECKING, Any, Dict, Mapping, Optional, Union
 
-from dv2s_gym.loop.record import HeldOutComparison, RegressComparison, RegressSummary, RoundRecord, RoundSteps
+from dv2s_gym.loop.record import (FamilyHarm, FamilyHarmRow, FinalVsStart, HeldOutComparison, HeldOutWorse,
+                                  RegressComparison, RegressSummary, RoundRecord, RoundSteps, recorded)
 from dv2s_gym.loop.settings import DEFAULTS, LoopError
+
+if TYPE_CHECKING:  # the regression statistics load scipy, kept off the command line's start: imported where used
+    from dv2s_gym.regress.stats import PairedTable
 
 __all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
            "FAMILY_RULE", "family_harm", "non_inferiority_p",
            "EVIDENCE_HINT", "EVIDENCE_FLOOR", "fewest_significant_pairs", "evidence_floor_note", "judge_round",
-           "heldout_worse", "too_small", "Recommendation", "recommendation"]
+           "heldout_worse", "too_small", "Judgement", "Recommendation", "recommendation"]
 
 ACCEPTED, REJECTED, NOT_ACCEPTED = "ACCEPTED", "REJECTED", "NOT ACCEPTED"
 EXIT_CODES = {ACCEPTED: 0, REJECTED: 1, NOT_ACCEPTED: 3}
@@ -99,12 +103,12 @@ def too_small(record: RoundRecord) -> Optional[str]:
     or families for a drop or a test, or a regression test that could not tell."""
     steps = RoundRecord.from_dict(record).steps
     reasons = []
-    after = steps.after or HeldOutComparison()
+    after = steps.after if steps.after is not None else HeldOutComparison()
     if after.underpowered:
         reasons.append("too few held-out episodes or families for a drop or a test")
     elif _control_below_floor(after):
         reasons.append("too few held-out episodes or families for the test against the control")
-    regress = steps.regress or RegressSummary()
+    regress = steps.regress if steps.regress is not None else RegressSummary()
     if regress.verdict == "INCONCLUSIVE":
         reasons.append(f"the regression test on {regress.episodes} paired episodes could not tell")
     return "; ".join(reasons) or None
@@ -144,56 +148,57 @@ def non_inferiority_p(table: Any, margin: float) -> float:
     return high
 
 
-def family_harm(tables: Mapping[str, Any], margin: float) -> Dict[str, Any]:
+def family_harm(tables: Mapping[str, "PairedTable"], margin: float) -> FamilyHarm:
     """The held-out families' harm rule (:data:`FAMILY_RULE`) on ``{family: PairedTable}`` of the fine-tuned policy
     (candidate) against another (baseline): per family the difference in failure rate (the point estimate) with its
     two-sided 95 % Newcombe interval, ``harm``: that difference worse for the fine-tuned policy by more than
     ``margin`` (this alone decides), and as evidence beside it the one-sided non-inferiority p-value at ``margin``
     (:func:`non_inferiority_p`), its Holm adjustment over the families and ``non_inferior`` (shown: adjusted p below
     :data:`HELDOUT_ALPHA` / 2). A harmed family is never non-inferior (its p-value is 1), so the test cannot clear
-    it; a family within the margin that is not shown non-inferior is not harmed. Returns ``{"margin", "rule", "families": {name: ...}, "harmed": [families with harm], "non_inferior":
-    [families shown non-inferior]}``."""
+    it; a family within the margin that is not shown non-inferior is not harmed. Returns a
+    :class:`~dv2s_gym.loop.record.FamilyHarm`: the ``margin``, the ``rule``, each family's row, the ``harmed``
+    families and those shown ``non_inferior``."""
     from dv2s_gym.regress.stats import holm, paired_difference_interval
 
     names = [name for name in sorted(tables) if tables[name].n]
     raw = [non_inferiority_p(tables[name], margin) for name in names]
     adjusted = holm(raw)
-    families: Dict[str, Any] = {}
+    families: Dict[str, FamilyHarmRow] = {}
     for name, p, q in zip(names, raw, adjusted):
         t = tables[name]
         low, high = paired_difference_interval(t, 1.0 - HELDOUT_ALPHA)
-        shown = q < HELDOUT_ALPHA / 2.0
-        families[name] = {"pairs": t.n, "fine_tuned_only": t.candidate_only, "other_only": t.baseline_only,
-                          "difference": t.difference, "interval": [low, high], "non_inferiority_p": p,
-                          "holm_p": q, "non_inferior": shown, "harm": t.difference > margin}
-    return {"margin": margin, "rule": FAMILY_RULE, "families": families,
-            "harmed": [name for name in names if families[name]["harm"]],
-            "non_inferior": [name for name in names if families[name]["non_inferior"]]}
+        families[name] = FamilyHarmRow(pairs=t.n, fine_tuned_only=t.candidate_only, other_only=t.baseline_only,
+                                       difference=t.difference, interval=(low, high), non_inferiority_p=p, holm_p=q,
+                                       non_inferior=q < HELDOUT_ALPHA / 2.0, harm=t.difference > margin)
+    return FamilyHarm(margin=margin, rule=FAMILY_RULE, families=families,
+                      harmed=tuple(name for name in names if families[name].harm),
+                      non_inferior=tuple(name for name in names if families[name].non_inferior))
 
 
-def _harm_text(harm: Mapping[str, Any], label: str) -> str:
+def _harm_text(harm: FamilyHarm, label: str) -> str:
     """The harmed families of :func:`family_harm`, in words."""
     parts = []
-    for name in harm.get("harmed") or []:
-        f = harm["families"][name]
-        parts.append(f"in family {name} the fine-tuned policy failed {f['fine_tuned_only']} of {f['pairs']} pairs "
-                     f"that {label} passed and passed {f['other_only']} it failed ({100 * f['difference']:+.1f} pp, "
-                     f"95% CI {100 * f['interval'][0]:+.1f} to {100 * f['interval'][1]:+.1f} pp, worse than the "
-                     f"margin {100 * harm['margin']:+.1f} pp, so non-inferiority cannot be shown: Holm-adjusted "
-                     f"one-sided p = {f['holm_p']:.3g})")
+    for name in harm.harmed:
+        f = harm.families[name]
+        parts.append(f"in family {name} the fine-tuned policy failed {f.fine_tuned_only} of {f.pairs} pairs "
+                     f"that {label} passed and passed {f.other_only} it failed ({100 * f.difference:+.1f} pp, "
+                     f"95% CI {100 * f.interval[0]:+.1f} to {100 * f.interval[1]:+.1f} pp, worse than the "
+                     f"margin {100 * harm.margin:+.1f} pp, so non-inferiority cannot be shown: Holm-adjusted "
+                     f"one-sided p = {f.holm_p:.3g})")
     return "; ".join(parts)
 
 
-def heldout_worse(tables: Mapping[str, Any], against: str, margin: Optional[float] = None) -> Optional[Dict[str, Any]]:
+def heldout_worse(tables: Mapping[str, Union["PairedTable", Mapping[str, int]]], against: str,
+                  margin: Optional[float] = None) -> Optional[HeldOutWorse]:
     """Whether the fine-tuned policy is significantly worse than ``against`` (``"start"`` or ``"control"``) on
     the held-out families: ``tables`` maps each held-out family to its paired table of fine-tuned (candidate)
     against ``against`` (baseline), a :class:`~dv2s_gym.regress.stats.PairedTable` or its dict
     (``both_fail``, ``candidate_only``, ``baseline_only``, ``neither``). ``dv2s regress``'s gate decides
     (:func:`dv2s_gym.regress.stats.compare_scenarios` with no margin, family-wise level :data:`HELDOUT_ALPHA`):
     worse when a family's or the pooled one-sided exact McNemar test rejects "no worse" with the fine-tuned policy
-    failing more. Returns ``{"against", "test", "worse", "families", "pairs", "fine_tuned_only",
-    "other_only", "p_value" (pooled, unadjusted), "worse_families", "reason", "family_harm"}``, or ``None`` without
-    pairs; ``family_harm`` is :func:`family_harm` of the same tables at ``margin`` (default: the loop's default
+    failing more. Returns a :class:`~dv2s_gym.loop.record.HeldOutWorse` (``against``, ``test``, ``worse``, the
+    numbers of ``families`` and ``pairs``, ``fine_tuned_only``, ``other_only``, ``p_value`` (pooled, unadjusted),
+    ``worse_families``, ``reason``, ``family_harm``), or ``None`` without pairs; ``family_harm`` is :func:`family_harm` of the same tables at ``margin`` (default: the loop's default
     margin)."""
     from dv2s_gym.regress.stats import PairedTable, Verdict, compare_scenarios
 
@@ -211,17 +216,17 @@ def heldout_worse(tables: Mapping[str, Any], against: str, margin: Optional[floa
               f"fine-tuned policy failed {pooled.candidate_only}, only {label} {pooled.baseline_only}; pooled "
               f"one-sided p = {overall.p_value:.3g}; "
               + (f"significantly worse{where}" if worse else "not significantly worse"))
-    return {"against": against, "test": HELDOUT_TEST, "worse": worse, "families": len(tables), "pairs": pooled.n,
-            "fine_tuned_only": pooled.candidate_only, "other_only": pooled.baseline_only,
-            "p_value": overall.p_value, "worse_families": failed, "reason": reason,
-            "family_harm": family_harm(tables, _default_margin() if margin is None else float(margin))}
+    return HeldOutWorse(against=against, test=HELDOUT_TEST, worse=worse, families=len(tables), pairs=pooled.n,
+                        fine_tuned_only=pooled.candidate_only, other_only=pooled.baseline_only,
+                        p_value=overall.p_value, worse_families=tuple(failed), reason=reason,
+                        family_harm=family_harm(tables, _default_margin() if margin is None else float(margin)))
 
 
 def _default_margin() -> float:
     return float(DEFAULTS["margin"])
 
 
-def _heldout_tests(after: HeldOutComparison) -> Dict[str, Optional[Dict[str, Any]]]:
+def _heldout_tests(after: HeldOutComparison) -> Dict[str, Optional[HeldOutWorse]]:
     """The held-out tests of a round's ``after`` step as recorded (``significantly_worse``); ``None`` where none
     ran (none does below the minimums or :data:`EVIDENCE_FLOOR`)."""
     return {"start": after.held_out_test("start"), "control": after.held_out_test("control")}
@@ -234,20 +239,37 @@ def _control_below_floor(after: HeldOutComparison) -> Optional[str]:
     return str(versus.underpowered) if versus is not None and versus.underpowered else None
 
 
-def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
-    """``{"verdict", "reason", "decided_by"}`` on round ``record``'s fine-tuned policy (module docstring; a
-    :class:`~dv2s_gym.loop.record.RoundRecord`, its JSON object read with ``RoundRecord.from_dict``);
-    ``None`` when the round fine-tuned none. ``decided_by`` names the test that decided (``regression``,
-    ``heldout_vs_control``, ``heldout_vs_start``, ``all`` when every test agreed on ACCEPTED), or the missing
-    one."""
-    record = RoundRecord.from_dict(record)
+@dataclasses.dataclass(frozen=True)
+class Judgement:
+    """The verdict on one round's fine-tuned policy (:func:`judge_round`)."""
+
+    verdict: str
+    """ACCEPTED, REJECTED or NOT ACCEPTED."""
+    decided_by: str
+    """The test that decided (``regression``, ``heldout_vs_control``, ``heldout_vs_start``,
+    ``heldout_families_vs_start`` / ``_vs_control``, ``untouched``, ``final_vs_start``, ``all`` when every test
+    agreed on ACCEPTED), or the missing one."""
+    reason: str
+    """Why, in words."""
+
+
+def judge_round(record: RoundRecord) -> Optional[Judgement]:
+    """The verdict on round ``record``'s fine-tuned policy (module docstring; a
+    :class:`~dv2s_gym.loop.record.RoundRecord`, its JSON object read with ``RoundRecord.from_dict``), a
+    :class:`Judgement`; ``None`` when the round fine-tuned none."""
+    found = _judged(RoundRecord.from_dict(record))
+    return None if found is None else Judgement(**found)
+
+
+def _judged(record: RoundRecord) -> Optional[Dict[str, str]]:
+    """:func:`judge_round`'s verdict, reason and deciding test as keyword arguments of :class:`Judgement`."""
     steps = record.steps
     if not record.fine_tuned:
         return None
-    recorded = bool(steps.regress)  # a regression step with something recorded
-    regress = steps.regress or RegressSummary()
+    tested = recorded(steps.regress)  # a regression step with something recorded
+    regress = steps.regress if steps.regress is not None else RegressSummary()
     verdict = regress.verdict
-    after = steps.after or HeldOutComparison()
+    after = steps.after if steps.after is not None else HeldOutComparison()
     tests = _heldout_tests(after)
     regression = "the regression test on the rest of the bank (paired non-inferiority against the round's start)"
     if verdict == "FAIL":
@@ -257,17 +279,17 @@ def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
     for key, label in (("control", "the control (the same fine-tuning without the mined scenarios)"),
                        ("start", "the starting policy")):
         test = tests.get(key)
-        if test and test.get("worse"):
+        if test is not None and test.worse:
             return {"verdict": REJECTED, "decided_by": f"heldout_vs_{key}",
                     "reason": f"the fine-tuned policy is significantly worse than {label} on the held-out families "
-                              f"({test.get('test')}: {test.get('reason')})"}
-    if not recorded:
+                              f"({test.test}: {test.reason})"}
+    if not tested:
         return {"verdict": NOT_ACCEPTED, "decided_by": "regression", "reason": "the round has no regression test yet"}
     if verdict != "PASS":
         return {"verdict": NOT_ACCEPTED, "decided_by": "regression",
                 "reason": f"{regression} is {verdict}, so no regression is ruled out ({regress.reason})"}
     missing = [key for key in ("start", "control") if tests.get(key) is None
-               and (key == "start" or after.control or after.vs_control is not None)]
+               and (key == "start" or recorded(after.control) or after.vs_control is not None)]
     if missing:
         why = (after.underpowered or (_control_below_floor(after) if missing == ["control"] else None)
                or ("no held-out pair ran" if not after.pairs else "not recorded"))
@@ -277,10 +299,10 @@ def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
                           f" did not run ({why}), so a harm on the held-out families is not ruled out"}
     for key, label in (("start", "the starting policy"), ("control", "the control")):
         test = tests.get(key)
-        if not test:
+        if test is None:
             continue
-        harm = test["family_harm"]
-        if harm.get("harmed"):
+        harm = test.family_harm if test.family_harm is not None else FamilyHarm()
+        if harm.harmed:
             return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_families_vs_{key}",
                     "reason": f"{regression} PASSed and the fine-tuned policy is not significantly worse than "
                               f"{label} on the held-out families, but a harm there is not ruled out: "
@@ -290,11 +312,11 @@ def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
         return {"verdict": NOT_ACCEPTED, "decided_by": "untouched",
                 "reason": f"{regression} PASSed and the held-out tests found no harm, but {untouched}"}
     parts = [f"not significantly worse than {'the starting policy' if key == 'start' else 'the control'} "
-             f"(p = {tests[key]['p_value']:.3g} on {tests[key].get('pairs')} held-out pairs from "
-             f"{tests[key].get('families')} famil{'y' if tests[key].get('families') == 1 else 'ies'})"
-             for key in ("start", "control") if tests.get(key)]
-    control_note = "" if tests.get("control") else "; no control arm to compare with"
-    margin = tests["start"]["family_harm"]["margin"]  # the test against the start always ran here (else missing)
+             f"(p = {test.p_value:.3g} on {test.pairs} held-out pairs from "
+             f"{test.families} famil{'y' if test.families == 1 else 'ies'})"
+             for key in ("start", "control") for test in [tests.get(key)] if test is not None]
+    control_note = "" if tests.get("control") is not None else "; no control arm to compare with"
+    margin = tests["start"].family_harm.margin  # the test against the start always ran here (else missing)
     control_note += (f"; no held-out family worse for the fine-tuned policy by more than the margin "
                      f"{100 * margin:+.1f} pp ({FAMILY_RULE})")
     vacuous = steps.untouched.vacuous() if steps.untouched is not None else None
@@ -308,35 +330,36 @@ def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
 def _untouched_fail(steps: RoundSteps) -> Optional[str]:
     """Why the untouched scenario set blocks ACCEPTED (the fine-tuned policy FAILed against the start there:
     significantly worse), or ``None``."""
-    versus = (steps.untouched.fine_tuned_vs_start if steps.untouched is not None else None) or RegressComparison()
+    versus = steps.untouched.fine_tuned_vs_start if steps.untouched is not None else None
+    versus = versus if versus is not None else RegressComparison()
     if versus.verdict != "FAIL":
         return None
     return (f"on the untouched scenario set (never mined or fine-tuned on) the fine-tuned policy FAILed against the "
             f"starting policy ({versus.reason}), so it harms scenes the loop did not touch")
 
 
-def _with_cross_round_check(judged: Dict[str, str], final: Optional[Mapping[str, Any]]) -> Dict[str, str]:
+def _with_cross_round_check(judged: Judgement, final: Optional[FinalVsStart]) -> Judgement:
     """``judged`` (an ACCEPTED round's verdict) after the cross-round check on its policy (``final_vs_start`` over
     the rounds up to it): REJECTED when that check FAILed, NOT ACCEPTED when it could not run (an error):
     a check that cannot run never counts as passed."""
-    if judged["verdict"] != ACCEPTED or not final:
+    if judged.verdict != ACCEPTED or final is None:
         return judged
-    rounds = ", ".join(map(str, final.get("rounds") or []))
-    if final.get("error"):
-        return {"verdict": NOT_ACCEPTED, "decided_by": "final_vs_start",
-                "reason": f"the regression test of the fine-tuned against the starting policy on the starting bank, "
-                          f"over the rounds so far, could not run ({final['error']}), so a regression against the "
-                          f"starting policy is not ruled out"}
-    if final.get("verdict") == "FAIL":  # each round passed against its own start
-        return {"verdict": REJECTED, "decided_by": "final_vs_start",
-                "reason": f"over rounds {rounds} the fine-tuned policy regressed against the starting one on the "
-                          f"starting bank: the regression test of the fine-tuned against the starting policy FAILed "
-                          f"({final.get('reason')})"}
-    if final.get("verdict") == "INCONCLUSIVE":
-        return {**judged, "reason": f"{judged['reason']}; but over rounds {rounds} the regression test of the "
-                                    f"fine-tuned against the starting policy on the starting bank was INCONCLUSIVE "
-                                    f"({final.get('reason')}): no regression against the starting policy over the "
-                                    "rounds is shown, nor ruled out"}
+    rounds = ", ".join(map(str, final.rounds or ()))
+    if final.error:
+        return Judgement(verdict=NOT_ACCEPTED, decided_by="final_vs_start",
+                         reason=f"the regression test of the fine-tuned against the starting policy on the starting "
+                                f"bank, over the rounds so far, could not run ({final.error}), so a regression "
+                                f"against the starting policy is not ruled out")
+    if final.verdict == "FAIL":  # each round passed against its own start
+        return Judgement(verdict=REJECTED, decided_by="final_vs_start",
+                         reason=f"over rounds {rounds} the fine-tuned policy regressed against the starting one on "
+                                f"the starting bank: the regression test of the fine-tuned against the starting "
+                                f"policy FAILed ({final.reason})")
+    if final.verdict == "INCONCLUSIVE":
+        return dataclasses.replace(judged, reason=f"{judged.reason}; but over rounds {rounds} the regression test of "
+                                                  f"the fine-tuned against the starting policy on the starting bank "
+                                                  f"was INCONCLUSIVE ({final.reason}): no regression against the "
+                                                  "starting policy over the rounds is shown, nor ruled out")
     return judged
 
 
@@ -386,6 +409,12 @@ class Recommendation:
         return cls(**{name: data[name] for name in names})
 
 
+def _final_of(report: Mapping[str, Any]) -> Optional[FinalVsStart]:
+    """The report's own cross-round check (its ``final_vs_start``), read into its record; ``None`` without one."""
+    found = report.get("final_vs_start")
+    return None if found is None else FinalVsStart.from_dict(found)
+
+
 def recommendation(report: Mapping[str, Any]) -> Recommendation:
     """The loop's recommendation from its report (``report.json``'s body): the policy to use, the verdict on the
     last fine-tuned policy and why (:class:`Recommendation`)."""
@@ -401,26 +430,26 @@ def recommendation(report: Mapping[str, Any]) -> Recommendation:
     for index, (record, judged) in enumerate(judged_rounds):
         # the cross-round check on this round's policy: the report's own for the last round, else the one
         # recorded with the round (the check over the rounds up to it)
-        final = (report.get("final_vs_start") if index == len(judged_rounds) - 1 and "final_vs_start" in report
+        final = (_final_of(report) if index == len(judged_rounds) - 1 and "final_vs_start" in report
                  else record.final_vs_start)
         judged = _with_cross_round_check(judged, final)
         judged_rounds[index] = (record, judged)
-        if judged["verdict"] == ACCEPTED:
+        if judged.verdict == ACCEPTED:
             recommended = record.new_policy or report.get("policy")
-        elif judged.get("decided_by") == "final_vs_start" and judged["verdict"] == REJECTED:
+        elif judged.decided_by == "final_vs_start" and judged.verdict == REJECTED:
             recommended = start  # the lineage regressed against the starting policy: back to it
     record, judged = judged_rounds[-1]
     candidate = record.new_policy or report.get("policy")
     number = record.round
-    if judged["verdict"] == ACCEPTED:
-        sentence = f"ACCEPTED: use the round {number} fine-tuned policy {candidate}: {judged['reason']}"
+    if judged.verdict == ACCEPTED:
+        sentence = f"ACCEPTED: use the round {number} fine-tuned policy {candidate}: {judged.reason}"
     else:
         keep = "the starting policy" if recommended == start else "the last accepted policy"
-        sentence = (f"{judged['verdict']}: keep {keep} {recommended}, not the round {number} fine-tuned policy "
-                    f"{candidate}: {judged['reason']}")
-    small = too_small(record) if judged["verdict"] == NOT_ACCEPTED else None
+        sentence = (f"{judged.verdict}: keep {keep} {recommended}, not the round {number} fine-tuned policy "
+                    f"{candidate}: {judged.reason}")
+    small = too_small(record) if judged.verdict == NOT_ACCEPTED else None
     if small:
         sentence += f". TOO SMALL TO JUDGE ({small}): {EVIDENCE_HINT}"
-    return Recommendation(policy=recommended, verdict=judged["verdict"], round=number, candidate=candidate,
-                          reason=judged["reason"], decided_by=judged.get("decided_by"),
-                          exit_code=EXIT_CODES[judged["verdict"]], too_small=small, sentence=sentence)
+    return Recommendation(policy=recommended, verdict=judged.verdict, round=number, candidate=candidate,
+                          reason=judged.reason, decided_by=judged.decided_by,
+                          exit_code=EXIT_CODES[judged.verdict], too_small=small, sentence=sentence)

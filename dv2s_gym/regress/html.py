@@ -35,7 +35,7 @@ from dv2s_gym.regress.clips import (DEFAULT_CLIP_CONFIG, ClipError, clip_window,
                                     render_policy_video)
 from dv2s_gym.regress.records import (BankInfo, PairedComparison, PairedEpisode, RegressReport, ReportSettings,
                                       ScenarioResult, Summary)
-from dv2s_gym.regress.report import Report, scenarios_by_severity, warnings as report_warnings
+from dv2s_gym.regress.report import scenarios_by_severity, warnings as report_warnings
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
                                   axis as _axis, escape as _e, finite as _num, fmt as _fmt,
                                   fmt_interval as _interval, interval_mark as _interval_mark, legend as _legend,
@@ -427,11 +427,10 @@ def _errors(report: RegressReport) -> str:
     return "<ul>" + "".join(items) + "</ul>"
 
 
-def render_html(report: Report, *, base: Union[str, os.PathLike] = ".",
+def render_html(report: RegressReport, *, base: Union[str, os.PathLike] = ".",
                 videos: Optional[Mapping[str, VideoSource]] = None, render_videos: bool = True,
                 max_videos: int = MAX_VIDEOS, progress: bool = False) -> str:
     """The report page as a string (see :func:`write_html`); relative trace paths resolve against ``base``."""
-    report = RegressReport.from_json(report)
     spec = report.candidate.spec if report.candidate is not None else None
     title = f"dv2s regress: {'?' if spec is None else spec}"
     has_baseline = report.baseline is not None
@@ -466,7 +465,7 @@ def render_html(report: Report, *, base: Union[str, os.PathLike] = ".",
     return "\n".join(parts)
 
 
-def write_html(report: Report, path: Union[str, os.PathLike], *,
+def write_html(report: Union[RegressReport, Mapping[str, Any]], path: Union[str, os.PathLike], *,
                videos: Optional[Mapping[str, VideoSource]] = None, render_videos: bool = True,
                max_videos: int = MAX_VIDEOS, progress: bool = False) -> Path:
     """Write the report as one self-contained HTML file at ``path`` (atomically); returns the path.

@@ -90,9 +90,8 @@ def _overall_case(report: RegressReport) -> ET.Element:
     return _case("overall verdict", "dv2s.regress", _seconds(report), verdict, reason, detail, out)
 
 
-def junit_tree(report: Union[RegressReport, Mapping[str, Any]]) -> ET.ElementTree:
+def junit_tree(report: RegressReport) -> ET.ElementTree:
     """The JUnit document of a report (see the module docstring)."""
-    report = RegressReport.from_dict(report)
     cases = [_scenario_case(report, name, entry) for name, entry in report.scenarios.items()]
     cases.append(_overall_case(report))
     counts = {key: str(sum(1 for c in cases if c.find(key) is not None)) for key in ("failure", "error", "skipped")}
@@ -120,7 +119,7 @@ def junit_tree(report: Union[RegressReport, Mapping[str, Any]]) -> ET.ElementTre
     return ET.ElementTree(root)
 
 
-def write_junit(report: Union[RegressReport, Mapping[str, Any]], path: Union[str, os.PathLike]) -> Path:
+def write_junit(report: RegressReport, path: Union[str, os.PathLike]) -> Path:
     """Write JUnit XML: one test case per scenario and one for the overall verdict; FAIL is a failure,
     ERROR an error, INCONCLUSIVE skipped with its reason; the suite has hostname, time and timestamp."""
     tree = junit_tree(report)

@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Dict, Mapping, Union
+from typing import Dict, Union
 
 from dv2s_gym.regress.html import write_html
 from dv2s_gym.regress.junit import write_junit
+from dv2s_gym.regress.records import RegressReport
 from dv2s_gym.regress.report import write_json, write_markdown
 
 __all__ = ["write_reports"]
 
 
-def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike],
+def write_reports(report: RegressReport, out_dir: Union[str, os.PathLike],
                   progress: bool = False, *, clips: bool = True) -> Dict[str, Path]:
     """Write ``report.json``, ``junit.xml``, ``report.md`` and ``report.html`` into ``out_dir``;
     returns format -> path. ``progress``: a bar on stderr while the HTML's clips render; ``clips=False``: the

@@ -120,8 +120,7 @@ __all__ = [
     "check_baseline_report",
     "write_json",
     "write_markdown",
-    "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings",
-    "Report"]
+    "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings"]
 
 SCHEMA = "dv2s-regress"
 SCHEMA_VERSION = 2
@@ -192,14 +191,14 @@ def _finite(value: Any) -> Optional[float]:
     return value if math.isfinite(value) else None
 
 
-def summarize_groups(groups: Mapping[str, Sequence[Union[RegressEpisode, Mapping[str, Any]]]], *,
-                     episode_groups: bool = False) -> Summary:
+def summarize_groups(groups: Mapping[str, Sequence[RegressEpisode]], *, episode_groups: bool = False) -> Summary:
     """Summary over several scenarios: rates over all episodes, means resampling whole scenarios.
 
     With ``episode_groups`` every episode is its own group (the within-scenario interval). A result is a
-    :class:`~scenario_bank.records.RegressEpisode` or its JSON object (a worker's or another tool's).
+    :class:`~scenario_bank.records.RegressEpisode` (a JSON object is read with :func:`~dv2s_gym.regress.records.as_result`
+    where it is read).
     """
-    groups = {name: [as_result(r) for r in results if r is not None] for name, results in groups.items()}
+    groups = {name: [r for r in results if r is not None] for name, results in groups.items()}
     every = [r for results in groups.values() for r in results]
     ok = _ok(every)
     means: Dict[str, Any] = {}
@@ -214,7 +213,7 @@ def summarize_groups(groups: Mapping[str, Sequence[Union[RegressEpisode, Mapping
                    min_ttc=means["min_ttc"], mean_speed=means["mean_speed"], episode_return=means["return"])
 
 
-def summarize(results: Sequence[Union[RegressEpisode, Mapping[str, Any]]]) -> Summary:
+def summarize(results: Sequence[RegressEpisode]) -> Summary:
     """Summary of one policy on one scenario (episodes resampled for the means' intervals)."""
     return summarize_groups({"": results}, episode_groups=True)
 
@@ -292,7 +291,7 @@ def build_report(*, bank: Mapping[str, Any], settings: Mapping[str, Any], candid
             overall verdict of a sequential run; a scenario FAIL still FAILs).
     """
     bank, settings = BankInfo.from_dict(bank), ReportSettings.from_dict(settings)
-    sequential = SequentialOutcome.from_dict(sequential) if sequential else None
+    sequential = SequentialOutcome.from_dict(sequential) if sequential is not None else None
     scenarios = list(bank.scenarios or ())
     paired = sorted(map(PairedEpisode.from_dict, episodes), key=lambda e: (
         scenarios.index(e.scenario) if e.scenario in scenarios else len(scenarios), e.scenario, int(e.seed)))
@@ -433,7 +432,7 @@ def check_baseline_report(report: RegressReport, *, path: Union[str, os.PathLike
             f"baseline report {path} cannot be a baseline: {len(errors)} of its episodes ended in an error "
             f"(first: {first.id} ({first.role}): {first.first_line[:160]}); "
             "rerun that run's command until it has no errors, and compare against that report")
-    theirs = report.bank or BankInfo()
+    theirs = report.bank if report.bank is not None else BankInfo()
     their_hashes = theirs.hashes or {}
     missing = [n for n in bank.scenarios if n not in their_hashes]
     if missing:
@@ -450,7 +449,7 @@ def check_baseline_report(report: RegressReport, *, path: Union[str, os.PathLike
             f" there, {str(bank.version)[:12]} here): changed scenario{'s' if len(changed) > 1 else ''} "
             f"{details}{' and more' if len(changed) > 3 else ''}; rerun the baseline on this bank "
             "(--baseline POLICY instead of --baseline-report)")
-    their_config = (report.settings.env_config if report.settings else None) or {}
+    their_config = (report.settings.env_config if report.settings is not None else None) or {}
     if dict(their_config) != dict(env_config):
         raise ReportMismatchError(
             f"baseline report {path} used another env config ({describe_differences(dict(env_config), dict(their_config))});"
@@ -458,10 +457,6 @@ def check_baseline_report(report: RegressReport, *, path: Union[str, os.PathLike
 
 
 # ----------------------------------------------------------------------------------- text
-Report = Union[RegressReport, Mapping[str, Any]]
-"""What the renderings take: a :class:`~dv2s_gym.regress.records.RegressReport` or its JSON object."""
-
-
 def _pct(value: Optional[float]) -> str:
     return "-" if value is None else f"{100 * value:.1f}%"
 
@@ -496,10 +491,9 @@ def _against(baseline: Optional[PolicyInfo], base: Optional[Path], quote: str = 
     return f" vs baseline `{baseline.spec}`{of}"
 
 
-def headline(report: Report, base: Optional[Path] = None) -> str:
+def headline(report: RegressReport, base: Optional[Path] = None) -> str:
     """The one line that says what a report compared: the policies, the failure classes, the scenarios and
     episodes, the margin and alpha, the bank version (a baseline report's path relative to ``base``)."""
-    report = RegressReport.from_dict(report)
     settings = report.settings
     failure = ", ".join(settings.failure)
     return (f"candidate `{report.candidate.spec}`{_against(report.baseline, base)}; failure: {failure}; "
@@ -511,10 +505,9 @@ def headline(report: Report, base: Optional[Path] = None) -> str:
 SEVERITY = {"ERROR": 0, "FAIL": 1, "INCONCLUSIVE": 2, "PASS": 3}
 
 
-def scenarios_by_severity(report: Report) -> List[str]:
+def scenarios_by_severity(report: RegressReport) -> List[str]:
     """Scenario names, worst first: ERROR, FAIL, INCONCLUSIVE, PASS, each by the largest rise in failure
     rate (measures only: by the candidate's failure rate), then by name."""
-    report = RegressReport.from_dict(report)
 
     def key(name: str) -> tuple:
         entry = report.scenario(name)
@@ -530,15 +523,14 @@ def scenarios_by_severity(report: Report) -> List[str]:
     return sorted(report.scenarios, key=key)
 
 
-def warnings(report: Report) -> List[str]:
+def warnings(report: RegressReport) -> List[str]:
     """What a reader must know before trusting the verdict (a baseline from another dv2s version, ...)."""
-    baseline = RegressReport.from_dict(report).baseline
+    baseline = report.baseline
     return [str(baseline.warning)] if baseline is not None and baseline.warning else []
 
 
-def power_lines(report: Report) -> List[str]:
+def power_lines(report: RegressReport) -> List[str]:
     """What the run could detect: the power per scenario and pooled at the margin and at the planned effect."""
-    report = RegressReport.from_dict(report)
     power = report.power
     if not power:
         return []
@@ -575,9 +567,8 @@ def _rows(report: RegressReport, order: Sequence[str], overall: str) -> List[Tup
     return [(name, report.scenario(name)) for name in order] + [(overall, report.overall)]
 
 
-def format_summary(report: Report) -> str:
+def format_summary(report: RegressReport) -> str:
     """The plain-text table ``dv2s regress`` prints."""
-    report = RegressReport.from_dict(report)
     rows = [("scenario", "n", "candidate fails", "baseline fails", "difference [95% CI]", "p (adjusted)", "verdict")]
     for name, entry in _rows(report, scenarios_by_severity(report), "OVERALL"):
         comparison = entry.comparison
@@ -705,9 +696,8 @@ def _markdown_measures(report: RegressReport, order: Sequence[str]) -> List[str]
     return _details("Measures per scenario (95% intervals)", measures)
 
 
-def _markdown(report: Report, report_path: str = "report.json", base: Optional[Path] = None) -> str:
+def _markdown(report: RegressReport, report_path: str = "report.json", base: Optional[Path] = None) -> str:
     """The Markdown report for a pull-request comment: the verdict and what to look at first, the rest folded."""
-    report = RegressReport.from_dict(report)
     title = (f"## dv2s regress: {report.verdict or 'measures (no baseline)'} - candidate `{report.candidate.spec}`"
              f"{_against(report.baseline, base, quote='`')}")
     lines = [title, "", _verdict_line(report), ""] + _markdown_facts(report)
@@ -734,9 +724,9 @@ def _markdown(report: Report, report_path: str = "report.json", base: Optional[P
     return text
 
 
-def aggregates_lines(report: Report) -> List[str]:
+def aggregates_lines(report: RegressReport) -> List[str]:
     """The context aggregates (:mod:`dv2s_gym.regress.aggregates`) as Markdown lines; none without them."""
-    aggregates = RegressReport.from_dict(report).aggregates
+    aggregates = report.aggregates
     if not aggregates:
         return []
     iqm = aggregates.get("return_iqm") or {}
@@ -750,12 +740,12 @@ def aggregates_lines(report: Report) -> List[str]:
             f"averaged): {_interval(poi, False)}"]
 
 
-def write_json(report: Report, path: Union[str, os.PathLike]) -> Path:
+def write_json(report: RegressReport, path: Union[str, os.PathLike]) -> Path:
     """Write the report as JSON (atomic, sorted keys): the record's :meth:`~RegressReport.to_json`, the serialisation
     boundary."""
-    return atomic_write_json(path, report.to_json() if isinstance(report, RegressReport) else report)
+    return atomic_write_json(path, report.to_json())
 
 
-def write_markdown(report: Report, path: Union[str, os.PathLike], report_path: str = "report.json") -> Path:
+def write_markdown(report: RegressReport, path: Union[str, os.PathLike], report_path: str = "report.json") -> Path:
     """Write the Markdown summary for a pull-request comment (paths relative to its folder)."""
     return atomic_write_text(path, _markdown(report, report_path, Path(path).parent))

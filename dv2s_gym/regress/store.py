@@ -146,12 +146,11 @@ class RunStore:
                                f"damaged: delete {self.root} and run again") from None
 
     # ---------------------------------------------------------------- append
-    def append(self, result: Union[RegressEpisode, Mapping[str, Any]]) -> None:
-        """Append one finished episode (one JSON line, flushed and synced): a record, or its JSON object."""
+    def append(self, result: RegressEpisode) -> None:
+        """Append one finished episode's record (one JSON line, flushed and synced)."""
         if self._handle is None:
             self._handle = open(self.results_path, "a", encoding="utf-8")
-        data = result.to_dict() if isinstance(result, RegressEpisode) else result
-        self._handle.write(json.dumps(data, sort_keys=True, default=str) + "\n")
+        self._handle.write(json.dumps(result.to_dict(), sort_keys=True, default=str) + "\n")
         self._handle.flush()
         if self.fsync:
             os.fsync(self._handle.fileno())
