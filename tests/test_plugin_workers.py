@@ -167,3 +167,22 @@ def test_the_environment_variable_names_plugins_to_the_command(monkeypatch, caps
     line = one_line_error(err)
     assert code == 2 and "plug-in module 'no_such_plugin_module' cannot be imported" in line
     assert PLUGINS_VARIABLE in line
+
+
+def test_a_plugin_whose_own_code_raises_is_told_from_one_not_found(monkeypatch, capsys, tmp_path):
+    (tmp_path / "boom_plugin.py").write_text('raise RuntimeError("boom")\n')
+    (tmp_path / "needs_a_dependency.py").write_text("import no_such_dependency_module\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv(PLUGINS_VARIABLE, "boom_plugin")
+    code, _, err = run(capsys, "bank", "list")
+    line = one_line_error(err)
+    assert code == 2 and "importing it raised RuntimeError: boom" in line
+    assert "run `python -c 'import boom_plugin'` to see the traceback" in line and "Python path" not in line
+    monkeypatch.setenv(PLUGINS_VARIABLE, "needs_a_dependency")
+    code, _, err = run(capsys, "bank", "list")
+    line = one_line_error(err)
+    assert code == 2 and "No module named 'no_such_dependency_module'" in line and "Python path" not in line
+    assert "import needs_a_dependency" in line
+    monkeypatch.setenv(PLUGINS_VARIABLE, "no_such_plugin_module")
+    _, _, err = run(capsys, "bank", "list")
+    assert "Python path of every worker" in one_line_error(err)
