@@ -44,7 +44,8 @@ from envs.config_check import observation_in_force
 from envs.errors import DV2SError
 from scenario_bank.extras import extra_of, missing_extra_message
 from scenario_bank.named_registry import Registry
-from scenario_bank.plugins import import_raised, missing_attribute, module_not_found
+from scenario_bank.plugins import import_raised, missing_attribute, module_not_found, registering_module
+from scenario_bank.plugins import remember_plugin
 from scenario_bank.records import RecordError
 from policies.card_record import ModelCard
 
@@ -373,11 +374,14 @@ def register_policy(name: str, factory: Callable[..., Any], overwrite: bool = Fa
     """Make ``load_policy(name)`` call ``factory(**options)``; a name registered already needs ``overwrite=True``.
 
     The factory returns a :class:`Policy` or a plain callable ``obs -> action``
-    (wrapped in :class:`CallablePolicy`).
+    (wrapped in :class:`CallablePolicy`). The module that calls this is remembered as a plug-in module: every
+    worker process imports it before its first episode, so register at its import time, in a module other
+    processes can import (not ``__main__``; :mod:`scenario_bank.plugins`).
     """
     if not name or any(ch in name for ch in "?:/\\") or name.endswith(".zip"):
         raise PolicyError(f"policy name {name!r} must not be empty or contain '?', ':', '/' or end in .zip")
     _REGISTRY.register(name, factory, overwrite=overwrite, module=_factory_module(factory))
+    remember_plugin(f"policy {name!r}", registering_module())
 
 
 def registered_policies() -> List[str]:

@@ -1,8 +1,8 @@
 """Plug-in modules: the user's modules that add to dv2s-gym's registries, and how every worker process gets them.
 
-A registration (a failure type, its detector) holds only in the process that made it, and the worker processes
-that run episodes (the local pool's, started by forkserver or spawn; Ray's actors) import the product's modules,
-not the user's. So the registries remember the module each plug-in comes from (:func:`remember_plugin`), and
+A registration (a failure type, its detector, a policy, a sampler, a DRA or SG backend) holds only in the process
+that made it, and the worker processes that run episodes (the local pool's, started by forkserver or spawn; Ray's
+actors) import the product's modules, not the user's. So the registries remember the module each plug-in comes from (:func:`remember_plugin`), and
 every worker imports those modules (:func:`import_plugins`) before its first episode: a plug-in module registers
 at import time, and then registers again in each worker.
 
@@ -15,14 +15,15 @@ module, named on the command line by the :data:`PLUGINS_VARIABLE` environment va
 from __future__ import annotations
 
 import importlib
+import inspect
 import os
 from types import ModuleType
 from typing import Dict, Iterable, List, Optional
 
 from scenario_bank.errors import DV2SError
 
-__all__ = ["PluginError", "PLUGINS_VARIABLE", "MAIN", "remember_plugin", "forget_plugin", "plugin_modules",
-           "check_plugins", "import_plugins", "load_plugins_from_environment", "module_not_found", "import_raised",
+__all__ = ["PluginError", "PLUGINS_VARIABLE", "MAIN", "registering_module", "remember_plugin", "forget_plugin",
+           "plugin_modules", "check_plugins", "import_plugins", "load_plugins_from_environment", "module_not_found", "import_raised",
            "missing_attribute"]
 
 PLUGINS_VARIABLE = "DV2S_PLUGINS"
@@ -45,6 +46,20 @@ def remember_plugin(what: str, module: Optional[str]) -> None:
     workers import them anyway), nor is a ``None`` module."""
     if module:
         _ORIGINS[what] = module
+
+
+def registering_module() -> Optional[str]:
+    """The module of the code that called the registration function calling this (``register_policy`` and the
+    like call it to learn which module registers, so that the workers import that module in turn); ``None`` when
+    that code is in the registration function's own package (its built-in entries, which every worker has)."""
+    frame = inspect.currentframe()
+    registration = frame.f_back if frame is not None else None
+    caller = registration.f_back if registration is not None else None
+    if caller is None:
+        return None
+    module = caller.f_globals.get("__name__")
+    own = str(registration.f_globals.get("__name__", "")).split(".")[0]
+    return None if module is None or module.split(".")[0] == own else module
 
 
 def forget_plugin(what: str) -> None:
