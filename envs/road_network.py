@@ -124,7 +124,6 @@ __all__ = [
     "convert_network",
     "load_road_network",
     "clear_road_network_cache",
-    "hw_lane_index_at",
     "scenic_successors",
     "STRAIGHT_TOLERANCE",
 ]
@@ -486,8 +485,6 @@ class ConvertedNetwork:
     #: Problems noticed during conversion (links not representable, ...).
     warnings: Tuple[str, ...] = ()
     _lanes_by_uid: Dict[str, "Lane"] = field(default_factory=dict, repr=False)
-    _polygon_tree: Any = field(default=None, repr=False)
-    _polygon_uids: Tuple[str, ...] = field(default=(), repr=False)
     _shoulder_area: Any = field(default=None, repr=False)
 
     def _uid(self, lane: Union["Lane", str]) -> str:
@@ -909,35 +906,6 @@ def _make_lane(info: _LaneInfo, line_types: List[int]) -> AbstractLane:
 # ---------------------------------------------------------------------------
 # Look-ups
 # ---------------------------------------------------------------------------
-
-
-def hw_lane_index_at(
-    converted: ConvertedNetwork,
-    position_hw: Sequence[float],
-    heading_hw: Optional[float] = None,
-) -> LaneIndex:
-    """highway-env lane index at a world position (highway-env frame).
-
-    Among the Scenic lanes whose polygon contains the point, the one whose
-    highway-env lane is closest in position and heading wins (connecting lanes
-    overlap inside intersections, so pass ``heading_hw`` there). Off all lanes it
-    falls back to highway-env's closest lane.
-    """
-    position = np.asarray(position_hw, dtype=float)[:2]
-    if converted._polygon_tree is None:
-        uids = tuple(converted.lane_index_of)
-        polygons = [converted._lanes_by_uid[u].polygon for u in uids]
-        converted._polygon_uids = uids
-        converted._polygon_tree = shapely.STRtree(polygons)
-    x, y = hw_to_scenic_position(position[0], position[1])
-    hits = converted._polygon_tree.query(shapely.Point(x, y), predicate="intersects")
-    if len(hits):
-        candidates = [converted.lane_index_of[converted._polygon_uids[k]] for k in sorted(hits)]
-        return min(
-            candidates,
-            key=lambda idx: converted.hw_network.get_lane(idx).distance_with_heading(position, heading_hw),
-        )
-    return converted.hw_network.get_closest_lane_index(position, heading_hw)
 
 
 def _polygons_of(region: Any) -> List[Any]:

@@ -31,7 +31,7 @@ import io
 import json
 import shutil
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional
 
 import numpy as np
 
@@ -45,7 +45,7 @@ if TYPE_CHECKING:
     from policies.training import TrainConfig
 
 __all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "LabelledBatch", "SavedIteration", "PartialIteration",
-           "run_identity", "checkpoint_position", "describe_position"]
+           "run_identity", "describe_position"]
 
 CHECKPOINT_DIR = "dagger_checkpoint"
 """The checkpoint's folder inside the fine-tuning run's ``out``."""
@@ -297,18 +297,6 @@ def _progress_problem(data: Any) -> Optional[str]:
     wrong = [name for name, kind in _PROGRESS_FIELDS.items()
              if not isinstance(data.get(name), kind) or isinstance(data.get(name), bool)]
     return f"no valid {', '.join(wrong)}" if wrong else None
-
-
-def checkpoint_position(out: Path | str) -> Optional[Tuple[int, int]]:
-    """``(finished iterations, states labelled in the next one)`` of the DAgger run checkpointed in
-    ``out``, or ``None`` when there is none (for progress messages; :meth:`DAggerCheckpoint.load`
-    checks the settings)."""
-    path = Path(out) / CHECKPOINT_DIR / "progress.json"
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-        return int(data["iteration"]), int((data.get("partial") or {}).get("rows", 0))
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        return None
 
 
 def describe_position(iteration: int, rows: int, iterations: int) -> str:

@@ -27,7 +27,7 @@ import json
 import os
 import sys
 from pathlib import Path
-from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 import multiprocessing
 import signal
 import time
@@ -59,7 +59,6 @@ __all__ = [
     "write_card",
     "read_card",
     "render_markdown",
-    "iter_card_episodes",
     "evaluate_parallel",
     "evaluate_for_card",
 ]
@@ -361,17 +360,6 @@ def render_markdown(card: ModelCard) -> str:
             cells = [_rate_cell(evaluation["policies"][label]["per_scenario"][name]["success"]) for label in labels]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-def iter_card_episodes(card: ModelCard) -> Iterable[Tuple[str, int]]:
-    """The ``(scenario, seed)`` episodes a card's evaluation ran, in order."""
-    evaluation = card.evaluation
-    if evaluation is None:
-        raise ModelCardError(f"model card {card.name!r} has no evaluation; complete it with `dv2s train --resume`")
-    base, seeds = int(evaluation["seed_base"]), int(evaluation["seeds_per_scenario"])
-    for name in evaluation["scenarios"]:
-        for offset in range(seeds):
-            yield name, base + offset
 
 
 def _evaluate_chunk(spec: str, episodes: List[Tuple[str, int]], config: Optional[Dict[str, Any]],

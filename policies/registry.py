@@ -44,6 +44,8 @@ from envs.config_check import observation_in_force
 from envs.errors import DV2SError
 from scenario_bank.extras import extra_of, missing_extra_message
 from scenario_bank.named_registry import Registry
+from scenario_bank.plugins import import_raised, missing_attribute, module_not_found, registering_module
+from scenario_bank.plugins import remember_plugin
 from scenario_bank.records import RecordError
 from policies.card_record import ModelCard
 
@@ -372,11 +374,14 @@ def register_policy(name: str, factory: Callable[..., Any], overwrite: bool = Fa
     """Make ``load_policy(name)`` call ``factory(**options)``; a name registered already needs ``overwrite=True``.
 
     The factory returns a :class:`Policy` or a plain callable ``obs -> action``
-    (wrapped in :class:`CallablePolicy`).
+    (wrapped in :class:`CallablePolicy`). The module that calls this is remembered as a plug-in module: every
+    worker process imports it before its first episode, so register at its import time, in a module other
+    processes can import (not ``__main__``; :mod:`scenario_bank.plugins`).
     """
     if not name or any(ch in name for ch in "?:/\\") or name.endswith(".zip"):
         raise PolicyError(f"policy name {name!r} must not be empty or contain '?', ':', '/' or end in .zip")
     _REGISTRY.register(name, factory, overwrite=overwrite, module=_factory_module(factory))
+    remember_plugin(f"policy {name!r}", registering_module())
 
 
 def registered_policies() -> List[str]:
@@ -567,12 +572,28 @@ def _is_factory(target: Callable) -> bool:
                    for p in parameters)
 
 
-def _load_object(module_name: str, attribute: str, spec: str, options: Dict[str, Any]) -> Policy:
+def _policy_module(module_name: str, spec: str) -> Any:
+    """The module of a ``module:attribute`` spec, or the error that tells a module not found (the path advice)
+    from a module whose own code raised."""
     try:
-        target = getattr(import_policy_module(module_name), attribute)
-    except (ImportError, AttributeError) as error:
-        raise PolicyError(f"policy {spec!r}: cannot import {attribute!r} from {module_name!r} ({error}); run from "
-                          "the folder that holds the module or put its folder on PYTHONPATH") from error
+        return import_policy_module(module_name)
+    except Exception as error:  # whatever the module's own code raises at import time is reported, not a fault here
+        if module_not_found(module_name, error):
+            raise PolicyError(f"policy {spec!r}: cannot import module {module_name!r} ({error}); run from the "
+                              "folder that holds the module or put its folder on PYTHONPATH") from error
+        raise PolicyError(f"policy {spec!r}: module {module_name!r} was found, but "
+                          f"{import_raised(module_name, error)}") from error
+
+
+def _attribute(module: Any, attribute: str, spec: str) -> Any:
+    try:
+        return getattr(module, attribute)
+    except AttributeError:
+        raise PolicyError(f"policy {spec!r}: {missing_attribute(module, attribute)}") from None
+
+
+def _load_object(module_name: str, attribute: str, spec: str, options: Dict[str, Any]) -> Policy:
+    target = _attribute(_policy_module(module_name, spec), attribute, spec)
     if isinstance(target, Policy):
         return target
     if isinstance(target, type) and issubclass(target, Policy):
@@ -590,10 +611,15 @@ def _load_object(module_name: str, attribute: str, spec: str, options: Dict[str,
         if isinstance(made, Policy):
             return made
         if not callable(made):
-            raise PolicyError(f"policy {spec!r}: the factory {attribute} returned a {type(made).__name__}, not a "
+            raise PolicyError(f"policy {spec!r}: the factory {attribute} returned {_a(type(made).__name__)}, not a "
                               "Policy or a callable obs -> action")
         return CallablePolicy(spec, made)
-    raise PolicyError(f"policy {spec!r} is a {type(target).__name__}, not a Policy or a callable")
+    raise PolicyError(f"policy {spec!r} is {_a(type(target).__name__)}, not a Policy or a callable")
+
+
+def _a(noun: str) -> str:
+    """``noun`` with its indefinite article (``an int``, ``a str``)."""
+    return f"{'an' if noun[:1].lower() in 'aeiou' else 'a'} {noun}"
 
 
 def read_model_card(checkpoint: Union[str, os.PathLike]) -> ModelCard:

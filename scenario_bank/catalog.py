@@ -15,6 +15,7 @@ __all__ = [
     "scenario_metadata",
     "scenario_path",
     "select_scenarios",
+    "unknown_bank_name",
 ]
 
 from scenario_bank.bank import BANK_DIR, Bank, UnknownScenarioError
@@ -58,12 +59,12 @@ def _suggestions(bank: Bank, item: str) -> List[str]:
     return near[:3]
 
 
-def unknown_bank_name(bank: Bank, item: str, command: str) -> UnknownScenarioError:
-    """The error for ``item``, which ``command`` (a command taking bank names and ``tag:<tag>`` only) cannot
-    select: what the command accepts, and the bank's names it may have meant."""
+def unknown_bank_name(bank: Bank, item: str, command: str, accepts: Optional[str] = None) -> UnknownScenarioError:
+    """The error for ``item``, which ``command`` cannot select: what the command accepts (by default bank names and
+    ``tag:<tag>`` for its ``--scenarios``; ``accepts`` says it otherwise), and the bank's names it may have meant."""
     near = _suggestions(bank, item)
-    accepts = (f"{command} --scenarios takes bank names and 'tag:<tag>' selections (`dv2s bank list` shows them "
-               "with their tags)")
+    accepts = accepts or (f"{command} --scenarios takes bank names and 'tag:<tag>' selections (`dv2s bank list` "
+                          "shows them with their tags)")
     if item in bank.problems:
         what = f"scenario {item!r} in the bank at {bank.root} is unusable: {bank.problems[item]}. {accepts}."
     elif item.strip().endswith(".scenic") or os.sep in item or "/" in item or "\n" in item:

@@ -1,8 +1,8 @@
 """Plug-in modules: the user's modules that add to dv2s-gym's registries, and how every worker process gets them.
 
-A registration (a failure type, its detector) holds only in the process that made it, and the worker processes
-that run episodes (the local pool's, started by forkserver or spawn; Ray's actors) import the product's modules,
-not the user's. So the registries remember the module each plug-in comes from (:func:`remember_plugin`), and
+A registration (a failure type, its detector, a policy, a sampler, a DRA or SG backend) holds only in the process
+that made it, and the worker processes that run episodes (the local pool's, started by forkserver or spawn; Ray's
+actors) import the product's modules, not the user's. So the registries remember the module each plug-in comes from (:func:`remember_plugin`), and
 every worker imports those modules (:func:`import_plugins`) before its first episode: a plug-in module registers
 at import time, and then registers again in each worker.
 
@@ -15,13 +15,16 @@ module, named on the command line by the :data:`PLUGINS_VARIABLE` environment va
 from __future__ import annotations
 
 import importlib
+import inspect
 import os
+from types import ModuleType
 from typing import Dict, Iterable, List, Optional
 
 from scenario_bank.errors import DV2SError
 
-__all__ = ["PluginError", "PLUGINS_VARIABLE", "MAIN", "remember_plugin", "forget_plugin", "plugin_modules",
-           "check_plugins", "import_plugins", "load_plugins_from_environment"]
+__all__ = ["PluginError", "PLUGINS_VARIABLE", "MAIN", "registering_module", "remember_plugin", "forget_plugin",
+           "plugin_modules", "check_plugins", "import_plugins", "load_plugins_from_environment", "module_not_found", "import_raised",
+           "missing_attribute"]
 
 PLUGINS_VARIABLE = "DV2S_PLUGINS"
 """The environment variable naming plug-in modules for ``dv2s`` (comma-separated module names)."""
@@ -43,6 +46,20 @@ def remember_plugin(what: str, module: Optional[str]) -> None:
     workers import them anyway), nor is a ``None`` module."""
     if module:
         _ORIGINS[what] = module
+
+
+def registering_module() -> Optional[str]:
+    """The module of the code that called the registration function calling this (``register_policy`` and the
+    like call it to learn which module registers, so that the workers import that module in turn); ``None`` when
+    that code is in the registration function's own package (its built-in entries, which every worker has)."""
+    frame = inspect.currentframe()
+    registration = frame.f_back if frame is not None else None
+    caller = registration.f_back if registration is not None else None
+    if caller is None:
+        return None
+    module = caller.f_globals.get("__name__")
+    own = str(registration.f_globals.get("__name__", "")).split(".")[0]
+    return None if module is None or module.split(".")[0] == own else module
 
 
 def forget_plugin(what: str) -> None:
@@ -71,12 +88,37 @@ def check_plugins() -> List[str]:
     return plugin_modules()
 
 
+def module_not_found(module: str, error: BaseException) -> bool:
+    """Whether ``error``, raised importing ``module``, says that ``module`` (or a package above it) is not found,
+    rather than that the module's own code failed (which may be a missing import *inside* it)."""
+    missing = getattr(error, "name", None) if isinstance(error, ModuleNotFoundError) else None
+    return bool(missing) and (module == missing or module.startswith(f"{missing}."))
+
+
+def import_raised(module: str, error: BaseException) -> str:
+    """The words for a module that was found but whose own code raised ``error`` while it was imported."""
+    reason = " ".join(f"{type(error).__name__}: {error}".split())
+    return f"importing it raised {reason}; run `python -c 'import {module}'` to see the traceback"
+
+
+def missing_attribute(module: object, attribute: str) -> str:
+    """The words for a module that has no ``attribute``: what it has no, and the public names it defines (not the
+    modules, classes and functions it imports)."""
+    own = getattr(module, "__name__", None)
+    names = sorted(name for name, value in vars(module).items()
+                   if not name.startswith("_") and not isinstance(value, ModuleType)
+                   and getattr(value, "__module__", own) == own)
+    shown = ", ".join(names[:20]) + (f", ... ({len(names)} in all)" if len(names) > 20 else "")
+    return f"module {getattr(module, '__name__', module)!r} has no {attribute!r}; it defines: {shown or 'nothing public'}"
+
+
 def import_plugins(modules: Iterable[str], where: str = "this process") -> None:
     """Import each of ``modules`` (a worker does, before its first episode, so that their registrations hold
     there too).
 
     Raises:
-        PluginError: naming the first module that cannot be imported, where, and why.
+        PluginError: naming the first module that cannot be imported, where, and why: not found (then it must
+            be put on the Python path), or its own code raised (then its traceback shows why).
     """
     for module in modules:
         try:
@@ -84,6 +126,9 @@ def import_plugins(modules: Iterable[str], where: str = "this process") -> None:
         except BaseException as error:  # a plug-in's own failure at import time, whatever it is, is reported
             if isinstance(error, KeyboardInterrupt):
                 raise
+            if not module_not_found(module, error):
+                raise PluginError(f"plug-in module {module!r} cannot be imported in {where}: "
+                                  f"{import_raised(module, error)}") from None
             reason = " ".join(f"{type(error).__name__}: {error}".split())
             raise PluginError(f"plug-in module {module!r} cannot be imported in {where} ({reason}); it must be "
                               "importable there: on the Python path of every worker (the same path on every "

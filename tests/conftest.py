@@ -38,3 +38,13 @@ def pytest_collection_modifyitems(config, items):
             slow_tests[item.path] = slow_tests.get(item.path, 0) + 1
     if slow_tests:
         items.sort(key=lambda item: -slow_tests.get(item.path, 0))
+
+
+@pytest.fixture(autouse=True)
+def plugin_modules_per_test(monkeypatch):
+    """A test's registrations (a policy, a sampler, a backend registered by a test module or a module in a
+    temporary folder) are remembered as plug-in modules for that test only: a later test's worker processes
+    would otherwise import them too, and a module in a removed folder cannot be imported."""
+    import scenario_bank.plugins as plugins
+
+    monkeypatch.setattr(plugins, "_ORIGINS", dict(plugins._ORIGINS))

@@ -387,3 +387,25 @@ def test_a_seeded_random_run_is_the_same_every_time(capsys, tmp_path):
         results.append({key: value for key, value in result.items() if key != "path"})
     assert results[0]["steps"] == 10 and results[0]["driver"] == "random"
     assert results[0] == results[1]
+
+
+@pytest.mark.parametrize("argv, command", [
+    (["bank", "show", "nosuch"], "`dv2s bank show`"),
+    (["bank", "rm", "nosuch"], "`dv2s bank rm`"),
+    (["demo", "--scenario", "nosuch"], "`dv2s demo --scenario`"),
+])
+def test_commands_taking_a_bank_name_advise_a_bank_name(argv, command, capsys, tmp_path):
+    if argv[1] == "rm":
+        argv = ["--bank", str(tmp_path)] + argv
+    elif argv[0] == "demo":
+        argv = argv + ["--out", str(tmp_path / "demo")]
+    code, _, err = run(capsys, *argv)
+    line = one_line_error(err)
+    assert code == 2 and f"{command} takes the name of a scenario in the" in line and "'nosuch'" in line
+    assert ".scenic file" not in line and "tag:" not in line
+    assert not (tmp_path / "demo").exists() or not list((tmp_path / "demo").iterdir())
+
+
+def test_bank_show_suggests_the_bank_name_meant(capsys):
+    code, _, err = run(capsys, "bank", "show", "highway_lead_vehicle_brake")
+    assert code == 2 and "Did you mean 'highway_lead_vehicle_brakes'" in one_line_error(err)

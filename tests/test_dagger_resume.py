@@ -14,7 +14,7 @@ import torch
 import policies.imitation as imitation
 from scenario_bank.run_identity import RunIdentityError
 from envs.dv2s_env import DV2SEnv
-from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, DAggerResumeError, checkpoint_position
+from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, DAggerResumeError
 from policies.imitation import ReferenceLabels
 from fine_tune_helpers import dagger_fine_tune
 from policies.model_card import read_card
@@ -28,6 +28,13 @@ SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT).env_config
 # an episode has ended
 RUN = dict(bank_dir=None, steps=440, weights=WEIGHTS, seed=3, n_envs=2, vec_env="dummy", iterations=2, epochs=2,
            batch_size=64, progress_bar=False)
+
+
+def checkpoint_position(out):
+    """``(finished iterations, states labelled in the next one)`` of the DAgger run checkpointed in ``out``, as its
+    ``progress.json`` records them."""
+    data = json.loads((out / CHECKPOINT_DIR / "progress.json").read_text(encoding="utf-8"))
+    return int(data["iteration"]), int((data.get("partial") or {}).get("rows", 0))
 
 
 def _labelled_env(stream: int = 0) -> ReferenceLabels:

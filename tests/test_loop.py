@@ -1077,11 +1077,13 @@ def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, 
     assert verdict["verdict"] == "NOT ACCEPTED" and verdict["policy"] == second["new_policy"]
     assert f"Policy to use: `{second['new_policy']}`" in report.paths["md"].read_text()
     saved = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"]
-    assert [r["next_policy"] for r in saved] == ["dv2s-ppo", second["new_policy"], second["new_policy"]]
+    in_folder = second["new_policy"].replace(str(tmp_path / "loop"), "<loop>")  # loop.json's path inside the folder
+    assert in_folder.startswith("ppo:<loop>/round_2/")
+    assert [r["next_policy"] for r in saved] == ["dv2s-ppo", in_folder, in_folder]
 
     again = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lines.append, **settings)
     assert len(miner.calls) == 3 and len(stand.fine_tunes) == 6  # resumed: nothing re-run, the same starts
-    assert [r["next_policy"] for r in again.rounds] == [r["next_policy"] for r in saved]
+    assert [r["next_policy"] for r in again.rounds] == [r["next_policy"] for r in report.rounds]
 
 
 @pytest.mark.parametrize("over_all_rounds, starts_from", [("FAIL", "start"), ("PASS", "fine-tuned")])
@@ -1115,7 +1117,7 @@ def test_the_next_round_follows_the_policy_to_use_when_the_rounds_are_judged_aga
     assert second["next_policy"] == third["policy"] == expected
     assert miner.calls[2]["policy"] == expected
     written = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"][1]
-    assert written["next_policy"] == expected
+    assert written["next_policy"] == expected.replace(str(tmp_path / "loop"), "<loop>")  # inside the loop folder
     assert second["next_policy_reason"].startswith("REJECTED" if over_all_rounds == "FAIL" else "ACCEPTED")
 
 
@@ -1363,14 +1365,36 @@ def test_an_unknown_loop_scenario_says_what_the_loop_takes(tmp_path, capsys, giv
     assert not (tmp_path / "loop" / "loop.json").exists()
 
 
-def test_a_moved_loop_folder_is_named_as_moved_not_as_foreign(tmp_path):
+def test_a_round_policy_outside_the_loop_folder_is_refused(tmp_path):
     out = tmp_path / "here"
     folder = out / "round_1" / "policy"
     folder.mkdir(parents=True)
     (folder / "model.zip").write_bytes(b"checkpoint")
-    with pytest.raises(LoopError, match=r"moved or copied from /data/there, .*move it back there"):
+    with pytest.raises(LoopError, match="not written by this loop as it stands"):
         loop_module._round_spec("ppo:/data/there/round_1/policy/model.zip", folder, out)
     with pytest.raises(LoopError, match="not written by this loop as it stands"):
         loop_module._round_spec("ppo:/data/there/other/model.zip", folder, out)
     inside = f"ppo:{folder / 'model.zip'}"
     assert loop_module._round_spec(inside, folder, out) == inside
+
+
+def test_a_moved_loop_folder_resumes_where_it_is_now(tmp_path, monkeypatch):
+    """``loop.json`` names the paths inside the loop folder relative to it: a loop killed part-way, then moved (or
+    copied) elsewhere, resumes there from its recorded fine-tuned checkpoint and adds a round."""
+    settings = dict(miner=FakeMiner(WIRING["scenarios"], failures_per_round=6), min_heldout_episodes=1,
+                    min_heldout_families=2, log=lambda _: None, **WIRING)
+    _StandIns(monkeypatch, kill_in="control")
+    with pytest.raises(_Kill):
+        run_loop("dv2s-ppo", out=tmp_path / "there", **settings)
+    written = (tmp_path / "there" / "loop.json").read_text()
+    assert str(tmp_path / "there") not in written
+    assert json.loads(written)["rounds"][0]["steps"]["fine_tune"]["model"] == "<loop>/round_1/policy/model.zip"
+    assert json.loads(written)["start"]["bank"] == "<loop>/bank"
+    (tmp_path / "there").rename(tmp_path / "here")
+    stand = _StandIns(monkeypatch)
+    moved = run_loop("dv2s-ppo", out=tmp_path / "here", rounds=2, **settings)
+    assert [call["out"] for call in stand.fine_tunes][0] == str(tmp_path / "here" / "round_1" / "control")
+    assert [record.new_policy for record in moved.rounds] == [
+        f"ppo:{tmp_path / 'here'}/round_{number}/policy/model.zip" for number in (1, 2)]
+    for name in ("loop.json", "report.json"):
+        assert str(tmp_path / "there") not in (tmp_path / "here" / name).read_text()

@@ -11,6 +11,7 @@ import pytest
 from mining_helpers import SpaceBuilt, recorded_run_folder
 from loop_helpers import run_loop
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.loop.run import STATE_VERSION
 from dv2s_gym.loop.settings import LoopError
 from dv2s_gym.mining.miner import SETTINGS_VERSION, mine
 from dv2s_gym.mining.settings import MineSettings
@@ -58,6 +59,7 @@ def test_a_mining_folder_of_another_format_is_refused_and_one_of_this_format_res
 @pytest.mark.parametrize("record", [
     {"settings": {"holdout_by": "family"}, "start": None, "rounds": []},
     {"schema": "dv2s-loop-state", "version": 0, "settings": {}, "start": None, "rounds": []},
+    {"schema": "dv2s-loop-state", "version": 1, "settings": {}, "start": None, "rounds": []},  # absolute paths
     {"schema": "dv2s-loop-state", "settings": {"holdout_by": "family"}, "start": None,
      "rounds": [{"round": 1, "steps": {"mine": {"errored": _ERRORED}}, "timings": {}}]},
 ])
@@ -68,7 +70,7 @@ def test_a_loop_folder_of_another_format_is_refused_in_one_line(tmp_path, record
     with pytest.raises(LoopError) as error:
         run_loop("dv2s-ppo", out=folder, budget=8, log=lambda _: None, progress=False)
     found = f"format {record['version']}" if "version" in record else "no format"
-    assert str(error.value) == _refusal(folder, "a loop", "loop.json", found, 1)
+    assert str(error.value) == _refusal(folder, "a loop", "loop.json", found, STATE_VERSION)
 
 
 class _PastTheCheck(Exception):

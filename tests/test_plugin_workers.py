@@ -167,3 +167,81 @@ def test_the_environment_variable_names_plugins_to_the_command(monkeypatch, caps
     line = one_line_error(err)
     assert code == 2 and "plug-in module 'no_such_plugin_module' cannot be imported" in line
     assert PLUGINS_VARIABLE in line
+
+
+def test_a_plugin_whose_own_code_raises_is_told_from_one_not_found(monkeypatch, capsys, tmp_path):
+    (tmp_path / "boom_plugin.py").write_text('raise RuntimeError("boom")\n')
+    (tmp_path / "needs_a_dependency.py").write_text("import no_such_dependency_module\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv(PLUGINS_VARIABLE, "boom_plugin")
+    code, _, err = run(capsys, "bank", "list")
+    line = one_line_error(err)
+    assert code == 2 and "importing it raised RuntimeError: boom" in line
+    assert "run `python -c 'import boom_plugin'` to see the traceback" in line and "Python path" not in line
+    monkeypatch.setenv(PLUGINS_VARIABLE, "needs_a_dependency")
+    code, _, err = run(capsys, "bank", "list")
+    line = one_line_error(err)
+    assert code == 2 and "No module named 'no_such_dependency_module'" in line and "Python path" not in line
+    assert "import needs_a_dependency" in line
+    monkeypatch.setenv(PLUGINS_VARIABLE, "no_such_plugin_module")
+    _, _, err = run(capsys, "bank", "list")
+    assert "Python path of every worker" in one_line_error(err)
+
+
+@pytest.fixture
+def registries(monkeypatch):
+    """The policy, sampler and DRA/SG registries as copies, dropped after the test."""
+    from dv2s_gym.mining.sampling import samplers
+    from dv2s_gym.pipeline import stages
+    from policies import registry
+
+    monkeypatch.setattr(registry, "_REGISTRY", registry._REGISTRY.copy())
+    monkeypatch.setattr(samplers, "_REGISTRY", samplers._REGISTRY.copy())
+    monkeypatch.setattr(stages, "_DRA_REGISTRY", stages._DRA_REGISTRY.copy())
+    monkeypatch.setattr(stages, "_SG_REGISTRY", stages._SG_REGISTRY.copy())
+    yield registry, samplers, stages
+    sys.modules.pop("my_registrations", None)
+
+
+def test_every_registration_remembers_the_module_that_made_it(registries, monkeypatch, tmp_path):
+    registry, samplers, stages = registries
+    (tmp_path / "my_registrations.py").write_text(textwrap.dedent("""\
+        from dv2s_gym.mining.sampling.samplers import SamplerRecord, register_sampler
+        from dv2s_gym.pipeline.stages import register_dra, register_sg
+        from policies.registry import register_policy
+        register_policy("my_idle", lambda **options: (lambda obs: 1))
+        register_sampler("my_sampler", SamplerRecord(lambda space, features, params: None))
+        register_dra("my_dra", lambda clip, **options: ("", {}))
+        register_sg("my_sg", lambda description, **options: None)
+        """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    importlib.import_module("my_registrations")
+    assert plugin_modules() == ["my_registrations"]
+    for what in ("policy 'my_idle'", "sampler 'my_sampler'", "DRA backend 'my_dra'", "SG backend 'my_sg'"):
+        forget_plugin(what)
+    assert plugin_modules() == []  # the product's own registrations are no plug-ins
+    registry.register_policy("in_main", lambda **options: (lambda obs: 1))  # this test module's, as a script's
+    assert plugin_modules() == [__name__]
+
+
+def test_a_policy_registered_in_main_is_refused_with_the_fix(registries):
+    from scenario_bank.plugins import PluginError, check_plugins
+
+    registry, _, _ = registries
+    exec(compile("register_policy('from_main', lambda **options: (lambda obs: 1))", "<script>", "exec"),
+         {"__name__": "__main__", "register_policy": registry.register_policy})
+    with pytest.raises(PluginError, match="policy 'from_main' is registered in __main__.*importable module"):
+        check_plugins()
+
+
+@pytest.mark.slow
+def test_a_policy_registered_by_an_imported_module_reaches_the_workers(registries, tmp_path):
+    plugin_policy = importlib.import_module("tests.plugin_idle_policy")
+    try:
+        assert plugin_modules() == ["tests.plugin_idle_policy"]  # imported here only, not named by DV2S_PLUGINS
+        report = run_regression(plugin_policy.NAME, scenarios=SCENARIOS[:1], episodes=2, workers=2,
+                                out_dir=tmp_path / "regress", env_config={"duration": 6}, progress=False,
+                                clips=False)
+        assert [e["candidate"]["error"] for e in report["episodes"]] == [None, None]
+    finally:
+        sys.modules.pop("tests.plugin_idle_policy", None)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -73,7 +75,7 @@ def test_registered_callables_and_module_attribute_specs(envs):
     via_import = load_policy("policies.registry:RandomPolicy?seed=3")
     via_import.bind(envs[:1])
     assert via_import.act(np.zeros((4, 8, 7))).shape == (4,)
-    with pytest.raises(PolicyError, match="cannot import"):
+    with pytest.raises(PolicyError, match="module 'policies.registry' has no 'NoSuchThing'; it defines: "):
         load_policy("policies.registry:NoSuchThing")
 
 
@@ -120,3 +122,37 @@ def test_broken_and_missing_checkpoints_are_clear_errors(tmp_path):
     broken.write_bytes(b"not a zip at all")
     with pytest.raises(PolicyError, match="does not load as an SB3 model"):
         load_policy(str(broken))
+
+
+@pytest.fixture
+def policy_modules(monkeypatch, tmp_path):
+    """Three modules beside the test: one defining some names, one whose code raises, one missing a dependency."""
+    (tmp_path / "polmod_a.py").write_text("X = 1\n\ndef make():\n    return 3\n\nclass Driver:\n    pass\n")
+    (tmp_path / "polmod_boom.py").write_text('raise RuntimeError("boom")\n')
+    (tmp_path / "polmod_dep.py").write_text("import no_such_dependency_module\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield
+    for name in ("polmod_a", "polmod_boom", "polmod_dep"):
+        sys.modules.pop(name, None)
+
+
+def test_a_spec_that_cannot_load_says_which_of_three_cases(policy_modules):
+    with pytest.raises(PolicyError, match="module 'polmod_a' has no 'nosuch'; it defines: Driver, X, make$"):
+        load_policy("polmod_a:nosuch")
+    with pytest.raises(PolicyError) as raised:
+        load_policy("polmod_boom:x")
+    assert "importing it raised RuntimeError: boom; run `python -c 'import polmod_boom'`" in str(raised.value)
+    assert "PYTHONPATH" not in str(raised.value)
+    with pytest.raises(PolicyError) as raised:
+        load_policy("polmod_dep:x")
+    assert "No module named 'no_such_dependency_module'" in str(raised.value)
+    assert "PYTHONPATH" not in str(raised.value)
+    with pytest.raises(PolicyError, match="cannot import module 'polmod_none'.*PYTHONPATH"):
+        load_policy("polmod_none:x")
+
+
+def test_a_spec_naming_a_value_says_an_int(policy_modules):
+    with pytest.raises(PolicyError, match="'polmod_a:X' is an int, not a Policy"):
+        load_policy("polmod_a:X")
+    with pytest.raises(PolicyError, match="returned an int, not a Policy"):
+        load_policy("polmod_a:make")

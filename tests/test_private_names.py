@@ -5,8 +5,10 @@ Every way in is checked: ``from module import _name``; ``module._name`` on a mod
 another name (``m = module``), loaded by ``import_module("...")`` or from its file
 (``importlib.util.module_from_spec(importlib.util.spec_from_file_location(...))``: the module its name or its path
 names, else a module of unknown origin, :data:`FROM_A_FILE`, whose private names are all refused); ``getattr(module, "_name")`` (and hasattr, setattr,
-delattr), ``vars(module)["_name"]`` and ``module.__dict__["_name"]``. A name computed at run time and a module's whole
-namespace (``vars``, ``dir``, ``__dict__``) are refused too: they cannot be told public. The modules that may share
+delattr), also through a local helper that wraps one of those on its parameters (``def reach(obj, name): return
+getattr(obj, name)``, then ``reach(module, "_name")``), ``vars(module)["_name"]`` and ``module.__dict__["_name"]``. A
+name computed at run time and a module's whole namespace (``vars``, ``dir``, ``__dict__``) are refused too: they
+cannot be told public. The modules that may share
 private names are listed below with the reason.
 
 Beside these binding-based checks, a rule by name holds whatever the spelling (:func:`private_names_by_name`): a
@@ -204,6 +206,46 @@ def _reached_names(node: ast.AST, aliases: Dict[str, str], known: set) -> Iterat
         yield source, COMPUTED
 
 
+Helper = Tuple[Tuple[str, int], Tuple[str, int]]
+"""A reflection helper's parameters: (name, position) of the object's, then of the name's."""
+
+
+def _reflection_helpers(tree: ast.AST) -> Dict[str, Helper]:
+    """A module's functions that reach an attribute by reflection on two of their parameters (``def reach(obj,
+    name): return getattr(obj, name)``, also through another such helper): function name -> their parameters
+    (:data:`Helper`). A call of one is checked as the reflection call it wraps."""
+    functions = [node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    helpers: Dict[str, Helper] = {}
+    changed = True
+    while changed:  # a helper calling a helper, in any order
+        changed = False
+        for function in functions:
+            order = [a.arg for a in function.args.posonlyargs + function.args.args + function.args.kwonlyargs]
+            for node in ast.walk(function):
+                holder, key = _wrapped_reflection(node, helpers)
+                if (function.name not in helpers and isinstance(holder, ast.Name) and isinstance(key, ast.Name)
+                        and holder.id in order and key.id in order):
+                    helpers[function.name] = ((holder.id, order.index(holder.id)), (key.id, order.index(key.id)))
+                    changed = True
+    return helpers
+
+
+def _wrapped_reflection(node: ast.AST, helpers: Dict[str, Helper]) -> Tuple[Optional[ast.AST], Optional[ast.AST]]:
+    """``(object, name)`` of a reflection call (``getattr(object, name)`` and the like) or of a call of a helper of
+    :func:`_reflection_helpers` (its arguments for those parameters); ``(None, None)`` for any other node."""
+    if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
+        return None, None
+    if node.func.id in REFLECTION and len(node.args) > 1:
+        return node.args[0], node.args[1]
+    if node.func.id not in helpers:
+        return None, None
+    keywords = {k.arg: k.value for k in node.keywords if k.arg}
+
+    def argument(name: str, position: int) -> Optional[ast.AST]:
+        return keywords.get(name, node.args[position] if position < len(node.args) else None)
+    return tuple(argument(*parameter) for parameter in helpers[node.func.id])  # type: ignore[return-value]
+
+
 _SPECS = "<specs>"
 """The key of :func:`_module_aliases`' answer holding the names bound to a ``spec_from_file_location`` call."""
 
@@ -245,6 +287,19 @@ def _module_aliases(module: str, path: Path, tree: ast.AST, known: set) -> Dict[
     return aliases
 
 
+def _through_helper(node: ast.AST, helpers: Dict[str, Helper], aliases: Dict[str, str], known: set
+                    ) -> List[Tuple[str, str]]:
+    """``(module, name)`` a call of a reflection helper (:func:`_reflection_helpers`) reaches, when it is given a
+    project module: the name when a literal names it, else :data:`COMPUTED`."""
+    if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in helpers):
+        return []
+    holder, key = _wrapped_reflection(node, helpers)
+    source = _module_named(holder, aliases, known) if holder is not None else None
+    if source is None:
+        return []
+    return [(source, key.value if isinstance(key, ast.Constant) and isinstance(key.value, str) else COMPUTED)]
+
+
 def private_uses(modules: Optional[List[Tuple[str, Path]]] = None,
                  only: Optional[str] = None) -> List[Tuple[str, int, str, str]]:
     """``(module, line, imported module, private name)`` of every private name one project module (or the module
@@ -263,8 +318,10 @@ def private_uses(modules: Optional[List[Tuple[str, Path]]] = None,
                     found += [(module, node.lineno, source, alias.name) for alias in node.names
                               if _is_private(alias.name)]
         aliases = _module_aliases(module, path, tree, known)
+        helpers = _reflection_helpers(tree)
         for node in ast.walk(tree):
-            for source, name in _reached_names(node, aliases, known):
+            for source, name in list(_reached_names(node, aliases, known)) + _through_helper(node, helpers, aliases,
+                                                                                              known):
                 if (name in (COMPUTED, NAMESPACE) or _is_private(name)) and source != module:
                     found.append((module, node.lineno, source, name))
     return [use for use in found if use[2] != use[0]]
@@ -510,6 +567,10 @@ def test_the_check_sees_both_ways_in(tmp_path, monkeypatch):
     ('heldout.__dict__["_relative_drop"]', "_relative_drop"),
     ("dir(heldout)", NAMESPACE),
     ('getattr(heldout, "_" + "rate")', COMPUTED),
+    ('def reach(obj, name):\n        return getattr(obj, name)\n    return reach(heldout, "_RATE".lower())', COMPUTED),
+    ('def reach(obj, name):\n        return getattr(obj, name)\n    return reach(name="_relative_drop", obj=heldout)', "_relative_drop"),
+    ('def reach(obj, name):\n        return getattr(obj, name)\n\n    def through(name, obj):\n'
+     '        return reach(obj, name)\n    return through("_RA" + "TE".lower(), heldout)', COMPUTED),
     ("module = heldout\n    return module._relative_drop", "_relative_drop"),
     ("module = dv2s_gym.loop.heldout\n    return module._relative_drop", "_relative_drop"),
     ('module = importlib.import_module("dv2s_gym.loop.heldout")\n    return module._relative_drop', "_relative_drop"),

@@ -24,7 +24,6 @@ from envs.road_network import (
     MapLoadError,
     MapNotFoundError,
     PolylineLane,
-    hw_lane_index_at,
     load_road_network,
 
 )
@@ -281,22 +280,9 @@ def test_centerline_samples_map_onto_hw_lane(converted: ConvertedNetwork):
                 scenic_heading = _chord_heading(line, s)
             expected = scenic_to_hw_heading(scenic_heading)
             worst_heading = max(worst_heading, abs(wrap_angle(hw_lane.heading_at(lon) - expected)))
-            if not converted.is_connecting(lane) and 0.2 <= f <= 0.8:
-                found = hw_lane_index_at(converted, pos, expected)
-                assert found == converted.index_of(lane)
     assert worst_lat < 0.1
     assert worst_heading < math.radians(3)
     assert artifacts <= 0.02 * samples
-
-
-def test_lane_lookup_inside_intersections_uses_heading(converted: ConvertedNetwork):
-    for uid in converted.connecting_lanes:
-        lane = converted.hw_lane(uid)
-        mid = lane.position(lane.length / 2, 0.0)
-        heading = lane.heading_at(lane.length / 2)
-        assert hw_lane_index_at(converted, mid, heading) == converted.index_of(uid)
-    far = np.array([1e6, 1e6])  # off the map: falls back to the closest lane
-    assert hw_lane_index_at(converted, far) == converted.hw_network.get_closest_lane_index(far)
 
 
 def test_closest_lane_index_matches_highway_env(converted: ConvertedNetwork):

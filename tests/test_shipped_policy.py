@@ -11,7 +11,6 @@ from policies.model_card import (
     MEASURES,
     bank_version,
     evaluate_parallel,
-    iter_card_episodes,
     outcome_code,
     read_card,
     render_markdown,
@@ -24,6 +23,12 @@ from scenario_bank.bank import Bank
 CARD = read_card(SHIPPED_CHECKPOINT)
 EVALUATION = CARD.evaluation
 CANDIDATE = EVALUATION["candidate"]
+
+
+def card_episodes():
+    """The ``(scenario, seed)`` episodes the card's evaluation ran, in order."""
+    base, seeds = int(EVALUATION["seed_base"]), int(EVALUATION["seeds_per_scenario"])
+    return [(name, base + offset) for name in EVALUATION["scenarios"] for offset in range(seeds)]
 
 
 def _codes(label: str) -> str:
@@ -59,7 +64,7 @@ def test_the_card_describes_its_training_and_the_current_bank():
     assert EVALUATION["scenarios"] == sorted(CARD.bank["scenarios"]) == Bank().names()
     # held-out episodes: every scenario at least 20 seeds from EVAL_SEED_BASE, far below training seeds
     assert EVALUATION["seed_base"] == EVAL_SEED_BASE and EVALUATION["seeds_per_scenario"] >= 20
-    assert max(seed for _, seed in iter_card_episodes(CARD)) < TRAIN_SEED_LOW
+    assert max(seed for _, seed in card_episodes()) < TRAIN_SEED_LOW
     assert training["train_seed_range"][0] == TRAIN_SEED_LOW
 
 
@@ -99,7 +104,7 @@ def test_rerunning_the_card_evaluation_reproduces_its_episodes_exactly():
     are checked for consistency above): every rerun episode ends exactly as the card records it,
     which is stronger than rates inside the card's intervals."""
     base = EVALUATION["seed_base"]
-    episodes = [(name, seed) for name, seed in iter_card_episodes(CARD)
+    episodes = [(name, seed) for name, seed in card_episodes()
                 if seed < base + RERUN_SEEDS_PER_SCENARIO]
     assert len(episodes) == RERUN_SEEDS_PER_SCENARIO * len(EVALUATION["scenarios"])
     for label in (CANDIDATE, "keep_lane"):

@@ -15,7 +15,8 @@ from dv2s_gym.cli.inputs import WEIGHTS, WEIGHTS_EXAMPLE, json_error, json_value
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_command, bank_option
 from scenario_bank.admission import ON_DUPLICATE_OF
-from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance, Sidecar
+from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Bank, Provenance, Sidecar
+from scenario_bank.catalog import unknown_bank_name
 from scenario_bank.errors import NearDuplicateWarning
 
 __all__ = ["add_parser", "run_add", "run_export", "run_import", "run_list", "run_rm", "run_sample", "run_show",
@@ -110,7 +111,8 @@ def _keys_sorted(value: Any) -> Any:
 
 def run_show(args: argparse.Namespace) -> int:
     """``dv2s bank show``: one scenario's metadata, files and script."""
-    entry = open_bank(args).get(args.name)
+    bank = open_bank(args)
+    entry = bank.get(_bank_name(bank, args.name, "dv2s bank show"))
     missing = set(entry.missing_files())
     files = [str(f) + (" (missing)" if str(f.relative_to(entry.folder)) in missing else "") for f in entry.files]
     # the sidecar's fields in the order its file holds them (the bank writes sidecars with sorted keys)
@@ -122,6 +124,15 @@ def run_show(args: argparse.Namespace) -> int:
              + "".join(f"file: {f}\n" for f in files) + f"\n{entry.script}")
     emit(args, data, human)
     return 0
+
+
+def _bank_name(bank: Bank, name: str, command: str) -> str:
+    """``name``, which ``command`` takes as a name of ``bank``'s scenarios (a usable one or one the bank lists as
+    unusable); otherwise the error saying that this command takes bank names, with the names meant."""
+    if name in bank or name in bank.problems:
+        return name
+    raise unknown_bank_name(bank, name, command, accepts=f"`{command}` takes the name of a scenario in the bank "
+                            "(`dv2s bank list` shows them)")
 
 
 def run_add(args: argparse.Namespace) -> int:
@@ -160,7 +171,7 @@ def run_rm(args: argparse.Namespace) -> int:
     """``dv2s bank rm``: remove the named scenarios."""
     bank = open_bank(args)
     for name in args.name:
-        bank.remove(name)
+        bank.remove(_bank_name(bank, name, "dv2s bank rm"))
     emit(args, {"removed": args.name}, f"removed {', '.join(args.name)}")
     return 0
 

@@ -7,6 +7,7 @@ from dataclasses import asdict
 
 from dv2s_gym.cli.inputs import output_folder
 from dv2s_gym.cli.output import json_text
+from scenario_bank.catalog import open_bank, unknown_bank_name
 
 __all__ = ["add_parser", "run"]
 
@@ -29,6 +30,11 @@ def run(args: argparse.Namespace) -> int:
     """Run the demo episodes and print their table (or JSON)."""
     from dv2s_gym.demo import format_table, run_demo
 
+    bank = open_bank()
+    for name in args.scenario or ():
+        if name not in bank:
+            raise unknown_bank_name(bank, name, "dv2s demo", accepts="`dv2s demo --scenario` takes the name of a "
+                                    "scenario in the shipped bank (`dv2s bank list` shows them)")
     rows = run_demo(args.out, scenarios=args.scenario or None, episodes=args.episodes, seed=args.seed,
                     duration=args.duration)
     if args.json:

@@ -66,6 +66,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
@@ -120,8 +121,13 @@ IDENTITY = ("policy",) + LoopSettings.resume_keys()
 HOLDOUT_BY = "family"
 """How a loop splits its mined scenarios (recorded in ``loop.json``)."""
 STATE_SCHEMA = "dv2s-loop-state"
-STATE_VERSION = 1
+STATE_VERSION = 2
 """The format of ``loop.json`` (bumped when its fields change; a loop folder of another format is refused)."""
+IN_FOLDER = "<loop>"
+"""How ``loop.json`` writes a path inside the loop folder: relative to it, after this mark
+(``<loop>/round_1/policy/model.zip``, ``ppo:<loop>/round_1/policy/model.zip``), read back as a path in the folder
+where the loop is now, so a loop folder moved or copied elsewhere resumes there. A path outside the folder (a bank
+given with ``--bank``, a starting checkpoint) is written as it is."""
 
 UNTOUCHED_BANK = Path(__file__).resolve().parent / "untouched"
 """The scenario set no loop mines or fine-tunes on: a bank folder of scripts written by others for Scenic's
@@ -182,6 +188,7 @@ class _State:
             # the same spec naming a checkpoint replaced in place is refused, naming what changed
             check_policy_unchanged(recorded, settings["policy"], folder=path.parent, run="loop", error=LoopError)
             data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY})  # what may change
+            data.update({key: _in_folder(data[key], path.parent, write=False) for key in ("start", "rounds")})
         else:
             data = {**record_format(STATE_SCHEMA, STATE_VERSION), "settings": settings, "start": None, "rounds": []}
         self.rounds: List[RoundRecord] = _read_rounds(data.pop("rounds"), path)
@@ -192,9 +199,11 @@ class _State:
 
     def save(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_json(self.path, {**self.extra, "settings": self.settings.to_dict(),
-                                      "start": None if self.start is None else self.start.to_dict(),
-                                      "rounds": [record.to_dict() for record in self.rounds]}, indent=1)
+        folder = self.path.parent
+        start = None if self.start is None else _in_folder(self.start.to_dict(), folder, write=True)
+        rounds = [_in_folder(record.to_dict(), folder, write=True) for record in self.rounds]
+        atomic_write_json(self.path, {**self.extra, "settings": self.settings.to_dict(), "start": start,
+                                      "rounds": rounds}, indent=1)
 
     def round(self, number: int) -> RoundRecord:
         """Round ``number``'s record (the rounds before it started when not yet)."""
@@ -209,6 +218,28 @@ class _State:
         if save:
             self.save()
         return record
+
+
+def _in_folder(value: Any, folder: Path, write: bool) -> Any:
+    """``value`` (JSON of ``loop.json``) with each path inside the loop ``folder``, whole or in a text (a policy spec
+    ``ppo:<path>``, a reason naming a checkpoint), written relative to it after :data:`IN_FOLDER` (``write``), or
+    read back as a path in ``folder`` as it is now (not ``write``); paths outside it as they are."""
+    if isinstance(value, dict):
+        return {key: _in_folder(item, folder, write) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_in_folder(item, folder, write) for item in value]
+    if not isinstance(value, str):
+        return value
+    if not write:
+        return value.replace(f"{IN_FOLDER}/", f"{folder}/")
+    roots = sorted({str(folder.absolute()), str(folder.resolve())}, key=len, reverse=True)
+    # an absolute path anywhere in the text; a relative one (the folder as given) where a word or a spec begins
+    starts = [rf"(^|[^\w.~/-]){re.escape(root)}(?=/)" for root in roots]
+    if not folder.is_absolute() and folder.parts:
+        starts.append(rf"((?:^|[\s(])(?:(?:{'|'.join(SB3_ALGORITHMS)}):)?){re.escape(str(folder))}(?=/)")
+    for start in starts:
+        value = re.sub(start, rf"\1{IN_FOLDER}", value)
+    return value
 
 
 def _read_rounds(rounds: List[Any], path: Path) -> List[RoundRecord]:
@@ -278,22 +309,6 @@ def _round_problem(rounds: List[Dict[str, Any]]) -> Optional[str]:
 
 
 # --------------------------------------------------------------------------- helpers
-def _moved_from(path: str, folder: Path, out: Path) -> Optional[Path]:
-    """The loop folder a round's checkpoint ``path`` was written in, when it is ``out`` moved or copied (the same
-    round folder and file under another root, and that file present here); ``None`` otherwise."""
-    try:
-        inner = folder.resolve().relative_to(out.resolve())
-    except ValueError:
-        return None
-    written = Path(path)
-    depth = len(inner.parts) + 1
-    if not path or len(written.parts) <= depth or written.parts[-depth:-1] != inner.parts:
-        return None
-    if not (folder / written.name).is_file():
-        return None
-    return written.parents[len(inner.parts)]
-
-
 def _round_spec(spec: Any, folder: Path, out: Path) -> str:
     """A round's policy spec read back from ``loop.json``: an SB3 checkpoint inside that round's own
     ``folder``, as the loop writes it. A spec naming anything else (code, a checkpoint elsewhere) is refused:
@@ -307,12 +322,6 @@ def _round_spec(spec: Any, folder: Path, out: Path) -> str:
         except (OSError, ValueError):
             inside = False
     if not inside:
-        moved_from = _moved_from(path if sep else "", folder, out)
-        if moved_from is not None:
-            raise LoopError(f"{out / 'loop.json'} names the round policy {text[:200]!r}: this loop folder was moved or "
-                            f"copied from {moved_from}, and a loop resumes only where it was written (loop.json "
-                            "names its checkpoints by their full paths); move it back there to resume it, or choose "
-                            "another --out to start over")
         raise LoopError(f"{out / 'loop.json'} names the round policy {text[:200]!r}, not a checkpoint in {folder}: "
                         "this loop folder was not written by this loop as it stands; choose another --out")
     return text

@@ -93,11 +93,11 @@ from scipy import stats
 
 from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT, gate_rejections
 from dv2s_gym.regress.errors import RegressError, SequenceStoppedError
-from policies.stats import check_count, check_level, mcnemar_p, two_sided_z, wilson_bounds, wilson_interval
+from policies.stats import check_level, mcnemar_p, two_sided_z, wilson_bounds, wilson_interval
 from scenario_bank.errors import WrongTypeError
 
 __all__ = ["DEFAULT_ALPHA", "DEFAULT_MARGIN", "DEFAULT_CORRELATION", "Verdict", "wilson_interval",
-           "clopper_pearson_interval", "cluster_bootstrap_mean", "cluster_bootstrap_rate", "PairedTable",
+           "cluster_bootstrap_mean", "PairedTable",
            "paired_difference_interval", "mcnemar_exact", "holm", "weighted_holm", "Comparison", "compare",
            "compare_scenarios", "SPENDING", "obrien_fleming_spending", "Look", "SequentialTest"]
 
@@ -125,30 +125,6 @@ class Verdict(str, enum.Enum):
 
 
 _VERDICT_OF_CODE = {_FAIL: Verdict.FAIL, _PASS: Verdict.PASS, _INCONCLUSIVE: Verdict.INCONCLUSIVE}
-
-
-# ---------------------------------------------------------------------------------------------
-# Intervals for one proportion
-
-
-def clopper_pearson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    """Clopper-Pearson ("exact") interval for a binomial proportion, from beta quantiles.
-
-    Args:
-        k: Number of successes.
-        n: Number of trials.
-        confidence: Two-sided confidence level.
-
-    Returns:
-        ``(low, high)``; ``(0.0, 1.0)`` when ``n == 0``.
-    """
-    k, n = check_count(k, n)
-    tail = (1.0 - check_level(confidence, "confidence")) / 2.0
-    if n == 0:
-        return 0.0, 1.0
-    low = 0.0 if k == 0 else float(stats.beta.ppf(tail, k, n - k + 1))
-    high = 1.0 if k == n else float(stats.beta.ppf(1.0 - tail, k + 1, n - k))
-    return low, high
 
 
 # ---------------------------------------------------------------------------------------------
@@ -194,23 +170,6 @@ def cluster_bootstrap_mean(
     means = sums[picks].sum(axis=1) / sizes[picks].sum(axis=1)
     low, high = np.quantile(means, [tail, 1.0 - tail])
     return estimate, float(low), float(high)
-
-
-def cluster_bootstrap_rate(
-    groups: Sequence[Sequence[bool]],
-    confidence: float = 0.95,
-    n_resamples: int = 2000,
-    seed: int = 0,
-) -> tuple[float, float, float]:
-    """Failure rate over all episodes, with a bootstrap interval resampling whole scenarios.
-
-    :func:`cluster_bootstrap_mean` applied to the outcomes as 0/1.
-
-    Returns:
-        ``(rate, low, high)``.
-    """
-    as_floats = [[1.0 if outcome else 0.0 for outcome in group] for group in groups]
-    return cluster_bootstrap_mean(as_floats, confidence, n_resamples, seed)
 
 
 # ---------------------------------------------------------------------------------------------

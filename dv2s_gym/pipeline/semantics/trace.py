@@ -59,6 +59,7 @@ Every vehicle (the ego included) is judged by the same rules:
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Set, Tuple
 
@@ -202,15 +203,16 @@ def map_view(trace) -> Optional[_MapView]:
     if not map_path:
         return None
     if map_path not in _MAP_VIEWS:
-        from envs.road_network import load_road_network
+        from envs.road_network import MapLoadError, load_road_network
         candidates = [Path(map_path), MAPS_DIR / Path(map_path).name]
         view = None
         for candidate in candidates:
             if candidate.is_file():
                 try:
                     view = _MapView(load_road_network(candidate))
-                except Exception:  # an unreadable map: the map-based rules do not fire
-                    view = None
+                except (MapLoadError, OSError) as error:  # what the loader raises for a map it cannot read
+                    warnings.warn(f"the map {candidate} of a trace cannot be loaded ({error}); the rules that need "
+                                  "the map (lanes kept, a junction crossed) are judged without it", stacklevel=2)
                 break
         _MAP_VIEWS[map_path] = view
     return _MAP_VIEWS[map_path]
