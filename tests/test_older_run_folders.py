@@ -154,6 +154,7 @@ def test_the_older_paths_are_gone():
     """No split by cluster, no failure kinds assumed for a report that names none, no anonymous error counts, no
     defaults for settings a record lacks, no family made up for a record without one."""
     from dv2s_gym.loop import errored
+    from dv2s_gym.loop.record import ErroredEpisodes
     from dv2s_gym.loop import split
     from dv2s_gym.mining.family import record_family
     from dv2s_gym.regress import failures
@@ -164,7 +165,7 @@ def test_the_older_paths_are_gone():
     assert not hasattr(split, "split_by_cluster") and not hasattr(failures, "FAILURE_BEFORE_CHOICE")
     assert not hasattr(run_identity, "setting_defaults")
     assert "counted_before_choice" not in FailureType.__dataclass_fields__
-    merged = errored.merged_messages([_ERRORED, _ERRORED])
+    merged = errored.merged_messages([ErroredEpisodes.from_dict(_ERRORED)] * 2)
     assert merged == {"s": [{"message": "boom", "count": 2}]}
     with pytest.raises(MiningError, match="episode 3 of s records no scenario family"):
         record_family(EpisodeRecord(index=3, scenario="s", seed=0))
