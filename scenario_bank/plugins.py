@@ -1,8 +1,8 @@
 """Plug-in modules: the user's modules that add to dv2s-gym's registries, and how every worker process gets them.
 
-A registration (a failure type, its detector, a policy, a sampler, a DRA or SG backend) holds only in the process
-that made it, and the worker processes that run episodes (the local pool's, started by forkserver or spawn; Ray's
-actors) import the product's modules, not the user's. So the registries remember the module each plug-in comes from (:func:`remember_plugin`), and
+A registration (a failure type, its detector, a policy) holds only in the process that made it, and the worker
+processes that run episodes (the local pool's, started by forkserver or spawn; Ray's actors) import the product's
+modules, not the user's. So the registries remember the module each plug-in comes from (:func:`remember_plugin`), and
 every worker imports those modules (:func:`import_plugins`) before its first episode: a plug-in module registers
 at import time, and then registers again in each worker.
 
@@ -23,8 +23,8 @@ from typing import Dict, Iterable, List, Optional
 from scenario_bank.errors import DV2SError
 
 __all__ = ["PluginError", "PLUGINS_VARIABLE", "MAIN", "registering_module", "remember_plugin", "forget_plugin",
-           "plugin_modules", "check_plugins", "import_plugins", "load_plugins_from_environment", "module_not_found", "import_raised",
-           "missing_attribute"]
+           "plugin_modules", "check_plugins", "import_plugins", "load_plugins_from_environment", "module_not_found",
+           "import_raised", "missing_attribute"]
 
 PLUGINS_VARIABLE = "DV2S_PLUGINS"
 """The environment variable naming plug-in modules for ``dv2s`` (comma-separated module names)."""

@@ -203,7 +203,9 @@ def registries(monkeypatch):
     sys.modules.pop("my_registrations", None)
 
 
-def test_every_registration_remembers_the_module_that_made_it(registries, monkeypatch, tmp_path):
+def test_a_policy_registration_remembers_the_module_that_made_it(registries, monkeypatch, tmp_path):
+    """Policies run in the worker processes, so their registering module is remembered; samplers and DRA/SG
+    backends run in the parent process only, so a registration of theirs (even in ``__main__``) is no plug-in."""
     registry, samplers, stages = registries
     (tmp_path / "my_registrations.py").write_text(textwrap.dedent("""\
         from dv2s_gym.mining.sampling.samplers import SamplerRecord, register_sampler
@@ -217,9 +219,8 @@ def test_every_registration_remembers_the_module_that_made_it(registries, monkey
     monkeypatch.syspath_prepend(str(tmp_path))
     importlib.import_module("my_registrations")
     assert plugin_modules() == ["my_registrations"]
-    for what in ("policy 'my_idle'", "sampler 'my_sampler'", "DRA backend 'my_dra'", "SG backend 'my_sg'"):
-        forget_plugin(what)
-    assert plugin_modules() == []  # the product's own registrations are no plug-ins
+    forget_plugin("policy 'my_idle'")
+    assert plugin_modules() == []  # the product's own registrations and the parent-only ones are no plug-ins
     registry.register_policy("in_main", lambda **options: (lambda obs: 1))  # this test module's, as a script's
     assert plugin_modules() == [__name__]
 

@@ -56,7 +56,6 @@ import numpy as np
 from dv2s_gym.mining.sampling.checkpoint_mac import seal, unseal
 from dv2s_gym.mining.errors import MiningError
 from scenario_bank.named_registry import Registry
-from scenario_bank.plugins import registering_module, remember_plugin
 
 __all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "NOVELTY",
            "SceneSampler", "SamplerRecord", "default_feedback", "make_sampler", "sampler_params", "is_adaptive",
@@ -127,10 +126,8 @@ def is_uniform(name: str) -> bool:
 
 def register_sampler(name: str, record: SamplerRecord, overwrite: bool = False) -> None:
     """Make ``make_sampler(name, ...)`` (and ``--sampler name``) build ``record``'s sampler; a name registered
-    already needs ``overwrite=True``. The calling module is remembered as a plug-in module, which every worker
-    process imports (:mod:`scenario_bank.plugins`)."""
+    already needs ``overwrite=True``."""
     _REGISTRY.register(name, record, overwrite=overwrite)
-    remember_plugin(f"sampler {name!r}", registering_module())
 
 
 def registered_samplers() -> List[str]:
