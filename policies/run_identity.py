@@ -181,9 +181,10 @@ def fingerprint_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[s
 
 
 def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: Any, run: str,
-                           error: type) -> Dict[str, Any]:
+                           error: type, key: str = RESUME_FINGERPRINT, role: str = "policy") -> Dict[str, Any]:
     """The policy's :func:`resume_fingerprint`, after checking it against the one ``recorded`` under
-    :data:`RESUME_FINGERPRINT` (the settings of the ``run``, e.g. ``"mining run"``, in ``folder``; a record of the
+    :data:`RESUME_FINGERPRINT` (or ``key``: another policy of the run, its ``role``, such as the mining run's
+    ``"reference driver"``) in the settings of the ``run``, e.g. ``"mining run"``, in ``folder`` (a record of the
     run's format, :func:`~scenario_bank.run_identity.check_format`, holds one).
 
     Raises:
@@ -191,7 +192,11 @@ def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: An
             restore the policy ..., or pass a new --out"`` when a fact differs.
     """
     now = resume_fingerprint(spec)
-    changes = fingerprint_changes(dict(recorded.get(RESUME_FINGERPRINT) or {}), now)
+    changes = fingerprint_changes(dict(recorded.get(key) or {}), now)
+    if changes and role != "policy":
+        raise error(f"{folder} holds a {run} whose {role} {spec} has changed since ({'; '.join(changes[:3])}"
+                    f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the {role} "
+                    "(its checkpoint or module as the run used it), or pass a new --out")
     if changes:
         raise error(f"{folder} holds a {run} of {spec} whose policy has changed since ({'; '.join(changes[:3])}"
                     f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the policy "

@@ -197,5 +197,6 @@ def check_bank_unchanged(recorded: Optional[Mapping[str, Any]], now: Mapping[str
     said = [f"the bank's script for {name!r} changed since the run began" for name in changed[:_SHOWN]]
     said += [f"{name!r} was not part of the run" for name in added[:_SHOWN]]
     said += [f"{name!r} is no longer asked" for name in gone[:_SHOWN]]
-    raise error(f"{run} over other scenario scripts ({'; '.join(said)}); restore the script{'s' if len(said) > 1 else ''}"
-                " as the run used them, or start a new --out folder")
+    restore = "the scripts as the run used them" if len(said) > 1 else "the script as the run used it"
+    raise error(f"{run} over other scenario scripts ({'; '.join(said)}); restore {restore}, or start a new --out "
+                "folder")
