@@ -8,7 +8,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 from dv2s_gym.mining.report_record import MineCounts
 from scenario_bank.failure_types import severity_order, type_label
 
-__all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
+__all__ = ["replaced_text", "breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
            "NOT_COMPARED_REASONS", "not_compared_reason", "not_compared_counts", "not_compared_text",
            "not_compared_names_text", "parameter_check_text", "clip_caption", "by_type_text"]
 
@@ -82,6 +82,18 @@ def percent_text(entry: Optional[Mapping[str, Any]]) -> str:
     if not entry or entry.get("value") is None:
         return "-"
     return f"{100 * entry['value']:.1f}% [{100 * entry['low']:.1f}, {100 * entry['high']:.1f}]"
+
+
+def replaced_text(settings: Mapping[str, Any]) -> str:
+    """The sentence a report's banner adds when plug-ins replaced built-in entries (a detector, the reference
+    driver) for the run (``settings``: the run's ``settings.json``, whose ``code_identity`` lists them), so that
+    its counts read as the plug-in's; ``""`` when none was."""
+    identity = settings.get("code_identity")
+    replaced = list(identity.get("replaced built-ins") or []) if isinstance(identity, Mapping) else []
+    if not replaced:
+        return ""
+    return (f"built-in{'s' if len(replaced) > 1 else ''} replaced by plug-ins: {', '.join(replaced)}; what this "
+            "report counts under those names is the plug-ins'")
 
 
 def seed_text(settings: Mapping[str, Any]) -> str:
