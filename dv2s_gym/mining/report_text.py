@@ -92,8 +92,9 @@ def replaced_text(settings: Mapping[str, Any]) -> str:
     replaced = list(identity.get("replaced built-ins") or []) if isinstance(identity, Mapping) else []
     if not replaced:
         return ""
-    return (f"built-in{'s' if len(replaced) > 1 else ''} replaced by plug-ins: {', '.join(replaced)}; what this "
-            "report counts under those names is the plug-ins'")
+    several = len(replaced) > 1
+    return (f"Built-in{'s' if several else ''} replaced by plug-ins: {', '.join(replaced)}; what this report counts "
+            f"under {'those names' if several else 'that name'} is the plug-ins'")
 
 
 def seed_text(settings: Mapping[str, Any]) -> str:
