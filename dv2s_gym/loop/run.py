@@ -122,7 +122,8 @@ IDENTITY = ("policy",) + LoopSettings.resume_keys()
 HOLDOUT_BY = "family"
 """How a loop splits its mined scenarios (recorded in ``loop.json``)."""
 REFERENCE_FINGERPRINT = "reference_fingerprint"
-"""The key under which ``loop.json`` records the reference driver's :func:`~policies.run_identity.resume_fingerprint`."""
+"""The key under which ``loop.json`` records the reference driver's
+:func:`~policies.run_identity.resume_fingerprint`."""
 STATE_SCHEMA = "dv2s-loop-state"
 STATE_VERSION = 2
 """The format of ``loop.json`` (bumped when its fields change; a loop folder of another format is refused)."""

@@ -95,7 +95,8 @@ refused on resume)."""
 LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
 REFERENCE_FINGERPRINT = "reference_fingerprint"
-"""The key under which ``settings.json`` records the reference driver's :func:`~policies.run_identity.resume_fingerprint`."""
+"""The key under which ``settings.json`` records the reference driver's
+:func:`~policies.run_identity.resume_fingerprint`."""
 _RESUME_KEYS = ("policy",) + MineSettings.resume_keys()
 """The keys of ``settings.json`` a resumed run must share with the recorded ones."""
 _SPACE_KEYS = ("scenarios",)
