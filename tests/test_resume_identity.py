@@ -258,3 +258,28 @@ def test_a_regression_resume_over_an_edited_script_or_a_changed_plugin_is_refuse
     script.write_text(script.read_text(encoding="utf-8") + "\n# edited\n", encoding="utf-8")
     with pytest.raises(ResumeMismatchError, match=f"the bank's script for '{SCENARIO}' \\(SHA-256\\): run has '"):
         run_regression("keep_lane", **run)
+
+
+# --------------------------------------------------------------------------- a DAgger fine-tuning
+def test_a_dagger_identity_holds_each_scripts_sha256_as_it_is_on_disk(tmp_path):
+    """The bank's own record of a script (its sidecar's ``content_hash``) is not updated by an edit of the script:
+    the identity reads the script itself, so an edited script makes another identity."""
+    from policies.dagger_checkpoint import run_identity as dagger_identity
+    from policies.dagger_config import DaggerConfig
+    from policies.registry import SHIPPED_CHECKPOINT
+
+    bank = tmp_path / "bank"
+    Bank().copy_to(bank)
+    config = TrainConfig(out=str(tmp_path / "ft"), algo="ppo", scenarios=(SCENARIO,), bank_dir=str(bank), steps=100,
+                         n_envs=1, eval_freq=0, card_seeds=0, checkpoint_freq=0, progress_bar=False, vec_env="dummy")
+
+    def identity():
+        return dagger_identity(source="dv2s-ppo", source_checkpoint=SHIPPED_CHECKPOINT, config=config,
+                               dagger=DaggerConfig(), weights={SCENARIO: 1.0}, env_config={})
+
+    before = identity()
+    assert before["scenario_hashes"] == bank_identity(Bank(bank), [SCENARIO])
+    script = bank / SCENARIO / "scenario.scenic"
+    script.write_text(script.read_text(encoding="utf-8") + "\n# edited\n", encoding="utf-8")
+    assert identity()["scenario_hashes"] != before["scenario_hashes"] == {
+        SCENARIO: Bank(bank).get(SCENARIO).content_hash}
