@@ -283,3 +283,22 @@ def test_a_dagger_identity_holds_each_scripts_sha256_as_it_is_on_disk(tmp_path):
     script.write_text(script.read_text(encoding="utf-8") + "\n# edited\n", encoding="utf-8")
     assert identity()["scenario_hashes"] != before["scenario_hashes"] == {
         SCENARIO: Bank(bank).get(SCENARIO).content_hash}
+
+
+# --------------------------------------------------------------------------- the mining report
+@pytest.mark.parametrize("replaced, said", [
+    ([], None),
+    (["detector 'collision' (replaced by noop_collision)"],
+     "Built-in replaced by plug-ins: detector 'collision' (replaced by noop_collision); what this run counts under "
+     "that name is the plug-ins'")])
+def test_a_mining_reports_banner_names_the_builtins_plugins_replaced(replaced, said):
+    from dv2s_gym.mining.html import render_html
+    from dv2s_gym.mining.report import build_report_from_records, format_summary, markdown
+
+    settings = {"policy": "rule", "sampler": "random", "seed": 0, "scenarios": [SCENARIO],
+                "code_identity": {"replaced built-ins": replaced}}
+    report = build_report_from_records(settings, [], [], {})
+    assert report.settings["code_identity"]["replaced built-ins"] == replaced  # report.json's settings
+    texts = (format_summary(report), markdown(report), render_html(report).replace("&#x27;", "'"))
+    for text in texts:
+        assert (said in text) if said else ("replaced by plug-ins" not in text)

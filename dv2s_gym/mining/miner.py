@@ -62,7 +62,7 @@ from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
 from dv2s_gym.mining.monitors import kind_label, types_without_detector
 from dv2s_gym.mining.report import write_reports
-from dv2s_gym.mining.report_text import error_warning
+from dv2s_gym.mining.report_text import error_warning, replaced_text
 from dv2s_gym.mining.sampling.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
 from dv2s_gym.mining.settings import (DEFAULT_BATCH, FEEDBACKS, MineSettings, read_run_settings, RunOrigin,
                                       RunSettings, SETTINGS_FILE)
@@ -75,6 +75,7 @@ from dv2s_gym.workers.pool import default_workers
 from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 from scenario_bank.bank import Bank, BankError
+from scenario_bank.named_registry import replaced_built_ins
 from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, RecordError
 from scenario_bank.failure_types import failure_table
@@ -179,6 +180,8 @@ class MineRun:
             f"pairs, {len({record_family(r) for r in failures})} scenario families with a failure; "
             f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
         ]
+        if replaced_built_ins():  # what the counts above count under a replaced name is a plug-in's
+            lines.append(replaced_text(replaced_built_ins()))
         if self.conversions:
             lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
                          f"{status.get('merged', 0)}, rejected {status.get('rejected', 0)}")

@@ -105,8 +105,8 @@ from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.sampling.rate import FailureRate, rate_estimates
 from dv2s_gym.mining.report_record import MineReport
 from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, by_type_text, error_warning,
-                                         not_compared_counts, parameter_check_text, rate_text, replaced_text,
-                                         seed_text)
+                                         not_compared_counts, parameter_check_text, rate_text, replaced_in,
+                                         replaced_text, seed_text)
 from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.settings import read_run_settings, RunSettings, SETTINGS_FILE
 from dv2s_gym.mining.report_text import percent_text as _pct
@@ -755,7 +755,7 @@ def headline(report: Union[MineReport, Mapping[str, Any]]) -> str:
             f"merged {counts.merged}, rejected {counts.rejected}"
             + (f"; {counts.errors} error(s)" if counts.errors else "")
             + (f". {_error_alarm(report)}" if counts.errors else "")
-            + (f". {replaced_text(settings)}" if replaced_text(settings) else ""))
+            + (f". {replaced_text(replaced_in(settings))}" if replaced_in(settings) else ""))
 
 
 def _error_alarm(report: MineReport) -> str:
