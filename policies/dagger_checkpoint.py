@@ -37,7 +37,7 @@ import numpy as np
 
 from policies.dagger_config import DaggerConfig
 from policies.training import TrainingError
-from scenario_bank.run_identity import check_format, check_identity, record_format
+from scenario_bank.run_identity import bank_identity, check_format, check_identity, record_format
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json, file_sha256
 from scenario_bank.bank import Bank
 
@@ -136,9 +136,11 @@ class SavedIteration:
 
 
 def _scenario_hashes(bank_dir: Optional[str], names: List[str]) -> Dict[str, Optional[str]]:
-    """Each scenario's script content hash in the bank (``None`` when the bank does not hold it)."""
+    """Each scenario's script SHA-256 as it is on disk (:func:`~scenario_bank.run_identity.bank_identity`; ``None``
+    when the bank does not hold it)."""
     bank = Bank(bank_dir) if bank_dir is not None else Bank()
-    return {name: (bank.get(name).content_hash or None) if name in bank else None for name in names}
+    scripts = bank_identity(bank, [name for name in names if name in bank])
+    return {name: scripts.get(name) for name in names}
 
 
 def run_identity(*, source: str, source_checkpoint: Path, config: "TrainConfig", dagger: "DaggerConfig",

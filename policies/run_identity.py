@@ -17,10 +17,17 @@ module gives, for a policy spec, the facts that decide how the policy drives (:f
 :func:`check_policy_unchanged`, to resume it when the same spec now names a changed checkpoint or module. (A DAgger
 fine-tuning records its source checkpoint's SHA-256 among its settings; a PPO fine-tuning copies the checkpoint
 into its run folder first.)
+
+The code half is :func:`code_identity`, recorded by every resumable run kind under :data:`CODE_IDENTITY` and checked
+by :func:`check_code_unchanged`: one SHA-256 over dv2s's own sources (every ``.py`` file of its four packages, so
+an edited editable install is noticed), the plug-in modules loaded in this process (``DV2S_PLUGINS``, and those of
+every registered failure type and detector) with the fingerprints of their source (as a ``module:attribute``
+policy's), what they registered (failure type or detector name -> module) and the built-in entries they replaced.
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import json
 import sys
@@ -32,9 +39,13 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional
 from policies.registry import (SB3_ALGORITHMS, SHIPPED_CHECKPOINT, parse_spec, registered_policies,
                                registered_policy_module)
 from scenario_bank.atomic import file_sha256
+from scenario_bank.failure_types import plugin_table
+from scenario_bank.named_registry import replaced_built_ins
+from scenario_bank.plugins import plugin_modules
 
 __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "check_policy_unchanged",
-           "checkpoint_path", "installed_version", "MAX_HELPER_FILES"]
+           "checkpoint_path", "installed_version", "MAX_HELPER_FILES", "CODE_IDENTITY", "dv2s_sources_sha256",
+           "code_identity", "check_code_unchanged", "module_fingerprint"]
 
 MAX_HELPER_FILES = 500
 """At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
@@ -143,13 +154,19 @@ def resume_fingerprint(spec: str) -> Dict[str, Any]:
         if found is not None:
             facts[f"module {module} source (SHA-256)"] = file_sha256(found)
     elif ":" in base:
-        module = base.partition(":")[0]
-        found = _module_file(module)
-        facts[f"module {module} source (SHA-256)"] = file_sha256(found) if found else "not found"
-        if found is not None:
-            for helper in _helper_files(found, module):
-                if helper != found.resolve():
-                    facts[f"module file {helper} (SHA-256)"] = file_sha256(helper)
+        facts.update(module_fingerprint(base.partition(":")[0]))
+    return facts
+
+
+def module_fingerprint(module: str) -> Dict[str, str]:
+    """The SHA-256 of a user's module's source file and of its helper files (module docstring), ``{description:
+    SHA-256}`` (``"not found"`` for a module with no source file)."""
+    found = _module_file(module)
+    facts = {f"module {module} source (SHA-256)": file_sha256(found) if found else "not found"}
+    if found is not None:
+        for helper in _helper_files(found, module):
+            if helper != found.resolve():
+                facts[f"module file {helper} (SHA-256)"] = file_sha256(helper)
     return facts
 
 
@@ -164,9 +181,10 @@ def fingerprint_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[s
 
 
 def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: Any, run: str,
-                           error: type) -> Dict[str, Any]:
+                           error: type, key: str = RESUME_FINGERPRINT, role: str = "policy") -> Dict[str, Any]:
     """The policy's :func:`resume_fingerprint`, after checking it against the one ``recorded`` under
-    :data:`RESUME_FINGERPRINT` (the settings of the ``run``, e.g. ``"mining run"``, in ``folder``; a record of the
+    :data:`RESUME_FINGERPRINT` (or ``key``: another policy of the run, its ``role``, such as the mining run's
+    ``"reference driver"``) in the settings of the ``run``, e.g. ``"mining run"``, in ``folder`` (a record of the
     run's format, :func:`~scenario_bank.run_identity.check_format`, holds one).
 
     Raises:
@@ -174,9 +192,77 @@ def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: An
             restore the policy ..., or pass a new --out"`` when a fact differs.
     """
     now = resume_fingerprint(spec)
-    changes = fingerprint_changes(dict(recorded.get(RESUME_FINGERPRINT) or {}), now)
+    changes = fingerprint_changes(dict(recorded.get(key) or {}), now)
+    if changes and role != "policy":
+        raise error(f"{folder} holds a {run} whose {role} {spec} has changed since ({'; '.join(changes[:3])}"
+                    f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the {role} "
+                    "(its checkpoint or module as the run used it), or pass a new --out")
     if changes:
         raise error(f"{folder} holds a {run} of {spec} whose policy has changed since ({'; '.join(changes[:3])}"
                     f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the policy "
                     "(its checkpoint or module as the run used it), or pass a new --out")
     return now
+
+
+# --------------------------------------------------------------------------- the code a run runs
+CODE_IDENTITY = "code_identity"
+"""The key under which a resumable run's record holds :func:`code_identity`."""
+
+_CODE_GROUPS = (("dv2s sources", "dv2s sources"), ("plug-in modules", "plug-in modules"),
+                ("module ", "plug-in modules' source"), ("failure types", "failure types"),
+                ("detectors", "detectors"), ("replaced built-ins", "replaced built-ins"))
+"""How a difference is named in a refusal: the first group whose prefix a fact's key starts with."""
+
+
+def dv2s_sources_sha256() -> str:
+    """One SHA-256 over every ``.py`` file of dv2s's four packages (``envs``, ``dv2s_gym``, ``policies``,
+    ``scenario_bank``): their paths and contents."""
+    digest = hashlib.sha256()
+    for package in _DV2S_PACKAGES:
+        root = _DV2S_ROOT / package
+        for path in sorted(root.rglob("*.py")) if root.is_dir() else []:
+            if "__pycache__" in path.parts:
+                continue
+            digest.update(str(path.relative_to(_DV2S_ROOT)).encode() + b"\0" + file_sha256(path).encode() + b"\n")
+    return digest.hexdigest()
+
+
+def code_identity() -> Dict[str, Any]:
+    """What a resumed run must find unchanged in the code it runs, ``{description: value}`` (module docstring):
+    ``"dv2s sources (SHA-256)"``, ``"plug-in modules"`` (sorted names) with each one's
+    :func:`module_fingerprint`, ``"failure types"`` and ``"detectors"`` registered by plug-ins (name -> module) and
+    ``"replaced built-ins"`` (:func:`scenario_bank.named_registry.replaced_built_ins`)."""
+    modules = plugin_modules()
+    facts: Dict[str, Any] = {"dv2s sources (SHA-256)": dv2s_sources_sha256(), "plug-in modules": modules}
+    for module in modules:
+        facts.update(module_fingerprint(module))
+    facts.update(plugin_table())
+    facts["replaced built-ins"] = replaced_built_ins()
+    return facts
+
+
+def _code_group(key: str) -> str:
+    return next((name for prefix, name in _CODE_GROUPS if key.startswith(prefix)), key)
+
+
+def check_code_unchanged(recorded: Mapping[str, Any], *, run: str, error: type,
+                         now: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
+    """The :func:`code_identity` of this process (or ``now``), after checking it against the one ``recorded``
+    under :data:`CODE_IDENTITY` (the record of ``run``, e.g. ``"out/mine holds a mining run"``).
+
+    Raises:
+        error: ``"<run> made with other code (<what>: run has ..., now ...); restore the code the run used, or
+            start a new --out folder"``, ``<what>`` naming each part that differs (``dv2s sources``, ``plug-in
+            modules``, ``plug-in modules' source``, ``failure types``, ``detectors``, ``replaced built-ins``).
+    """
+    current = dict(code_identity() if now is None else now)
+    old = dict(recorded.get(CODE_IDENTITY) or {})
+    changes = fingerprint_changes(old, current)
+    if changes:
+        parts = sorted({_code_group(change.partition(":")[0]) for change in changes},
+                       key=lambda name: [g for _, g in _CODE_GROUPS].index(name) if name in
+                       [g for _, g in _CODE_GROUPS] else len(_CODE_GROUPS))
+        shown = "; ".join(changes[:3]) + (f"; and {len(changes) - 3} more" if len(changes) > 3 else "")
+        raise error(f"{run} made with other code ({', '.join(parts)} differ: {shown}); restore the code the run "
+                    "used (dv2s's sources, the plug-in modules DV2S_PLUGINS names), or start a new --out folder")
+    return current

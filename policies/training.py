@@ -71,7 +71,10 @@ from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_path, atomic_write_json
 from scenario_bank.field_checks import (check_bool, check_choice, check_int, check_mapping, check_names,
                                         check_number, check_path)
-from scenario_bank.run_identity import check_format, check_identity, record_format
+from scenario_bank.bank import Bank
+from scenario_bank.run_identity import (BANK_IDENTITY, RunIdentityError, bank_identity, check_bank_unchanged,
+                                       check_format, check_identity, record_format)
+from policies.run_identity import CODE_IDENTITY, check_code_unchanged, code_identity
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 import stable_baselines3 as sb3
@@ -345,14 +348,17 @@ class TrainConfig:
 
 
 _RUN_SCHEMA = "dv2s-train-run"
-_RUN_VERSION = 1
+_RUN_VERSION = 2
 """The format of a training run's ``run.json`` (bumped when its fields change; a run folder of another format is
 refused on resume)."""
 
 
-def _new_run_record(config: TrainConfig) -> Dict[str, Any]:
-    """A new run's ``run.json``: its format, its settings and no segment yet."""
-    return {**record_format(_RUN_SCHEMA, _RUN_VERSION), "config": config.to_json(), "segments": []}
+def _new_run_record(config: TrainConfig, names: Sequence[str]) -> Dict[str, Any]:
+    """A new run's ``run.json``: its format, its settings, the scripts of its scenarios ``names``
+    (:func:`~scenario_bank.run_identity.bank_identity`), the code (:func:`~policies.run_identity.code_identity`) and
+    no segment yet."""
+    return {**record_format(_RUN_SCHEMA, _RUN_VERSION), "config": config.to_json(),
+            BANK_IDENTITY: bank_identity(Bank(config.bank_dir), names), CODE_IDENTITY: code_identity(), "segments": []}
 
 
 _FINE_TUNING_ONLY = ("learning_rate", "reward_weights")
@@ -781,11 +787,15 @@ def _resolve_names(config: TrainConfig) -> List[str]:
     return sorted(names)
 
 
-def _check_resume(config: TrainConfig, recorded: Mapping[str, Any]) -> None:
-    """Refuse ``config`` unless it has the identity of the run's ``recorded`` settings (``run.json``'s ``config``,
-    :meth:`TrainConfig.to_json`'s form: a fine-tuning setting it leaves out is ``None`` on both sides)."""
-    check_identity(recorded, config.to_json(), TrainConfig.IDENTITY, run=f"{config.out} holds a training run",
+def _check_resume(config: TrainConfig, record: Mapping[str, Any], names: Sequence[str]) -> None:
+    """Refuse ``config`` unless it has the identity of the run's ``record`` (``run.json``): its settings
+    (``config``, :meth:`TrainConfig.to_json`'s form: a fine-tuning setting it leaves out is ``None`` on both sides),
+    the scripts of its scenarios ``names`` and the code."""
+    run = f"{config.out} holds a training run"
+    check_identity(record["config"], config.to_json(), TrainConfig.IDENTITY, run=run,
                    fix="resume with the run's own settings (omit the option) or start a new run in another --out")
+    check_bank_unchanged(record.get(BANK_IDENTITY), bank_identity(Bank(config.bank_dir), names), run=run)
+    check_code_unchanged(record, run=run, error=RunIdentityError)
 
 
 def _new_model(config: TrainConfig, venv, tensorboard_log: str):
@@ -869,7 +879,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         raise TrainingError(f"--out {out} is a file; choose a folder for the run")
     names = _resolve_names(config)
     run_path = out / "run.json"
-    resume, record, checkpoint = _open_record(config, resume, log)
+    resume, record, checkpoint = _open_record(config, names, resume, log)
 
     import torch
 
@@ -960,20 +970,21 @@ def _callbacks(config: TrainConfig, names: Sequence[str], env_config: Mapping[st
     return callbacks, saver
 
 
-def _open_record(config: TrainConfig, resume: bool, log: Callable[[str], None]
+def _open_record(config: TrainConfig, names: Sequence[str], resume: bool, log: Callable[[str], None]
                  ) -> Tuple[bool, Dict[str, Any], Optional[Path]]:
-    """``(resume, run.json's record, the newest checkpoint)`` of the run in ``config.out``: a resumed run's
-    record (its settings checked against ``config``), or a new one (refused over an existing run)."""
+    """``(resume, run.json's record, the newest checkpoint)`` of the run of the scenarios ``names`` in
+    ``config.out``: a resumed run's record (checked against ``config``, the scripts and the code), or a new one
+    (refused over an existing run)."""
     out = Path(config.out)
     checkpoint = latest_checkpoint(out)
-    record: Dict[str, Any] = _new_run_record(config)
+    record: Dict[str, Any] = _new_run_record(config, names)
     if resume:
         _, record = load_run_config(out)
-        _check_resume(config, record["config"])
+        _check_resume(config, record, names)
         if checkpoint is None:
             # stopped before its first checkpoint: nothing was kept, so the run starts over in place
             log(f"{out} holds no checkpoint yet (the run stopped before its first one): starting from step 0")
-            resume, record = False, _new_run_record(config)
+            resume, record = False, _new_run_record(config, names)
         else:
             record["config"] = config.to_json()
     elif checkpoint is not None or (out / "run.json").exists():
@@ -1213,4 +1224,4 @@ def _first_checkpoint(config: TrainConfig, source: Path, start_step: int, learni
             model.learning_rate = float(learning_rate)
             model._setup_lr_schedule()
             model.save(tmp)
-    atomic_write_json(out / "run.json", _new_run_record(config))
+    atomic_write_json(out / "run.json", _new_run_record(config, _resolve_names(config)))

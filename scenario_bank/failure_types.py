@@ -24,7 +24,7 @@ from scenario_bank.plugins import forget_plugin, remember_plugin
 __all__ = ["FailureTypeError", "UnknownDetectorError", "FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table",
            "failure_type", "severity_order",
            "register_failure_type", "unregister_failure_type", "type_label", "attach_detection", "detach_detection",
-           "happened"]
+           "happened", "plugin_table"]
 
 
 class FailureTypeError(DV2SError, ValueError):
@@ -149,15 +149,30 @@ _DETECTION: Dict[str, Detection] = {}
 a part that may not import the miner (``dv2s regress``'s worker task) can run the detector."""
 
 
-def attach_detection(name: str, detection: Detection) -> None:
-    """Let :func:`happened` find the failure type ``name`` with ``detection`` (the miner's detector registry does
-    this when a detector registers; :func:`detach_detection` undoes it)."""
+_DETECTION_MODULES: Dict[str, Optional[str]] = {}
+"""The module defining each attached detection (its detector's ``detect``)."""
+
+
+def attach_detection(name: str, detection: Detection, module: Optional[str] = None) -> None:
+    """Let :func:`happened` find the failure type ``name`` with ``detection``, defined in ``module`` (the miner's
+    detector registry does this when a detector registers; :func:`detach_detection` undoes it)."""
     _DETECTION[name] = detection
+    _DETECTION_MODULES[name] = module
 
 
 def detach_detection(name: str) -> None:
     """Undo :func:`attach_detection` for ``name``."""
     _DETECTION.pop(name, None)
+    _DETECTION_MODULES.pop(name, None)
+
+
+def plugin_table() -> Dict[str, Dict[str, Optional[str]]]:
+    """What plug-ins registered in this process: ``{"failure types": {name: module}, "detectors": {name:
+    module}}``, each sorted by name (a detector registered at run time, over a built-in type too; the built-in
+    detectors are dv2s's own code and not listed)."""
+    types = {name: _REGISTERED.module(name) for name in sorted(_REGISTERED)}
+    detectors = {name: _DETECTION_MODULES.get(name) for name in sorted(_DETECTION)}
+    return {"failure types": types, "detectors": detectors}
 
 
 def happened(name: str, result: Any, trace: Any, settings: Any) -> bool:

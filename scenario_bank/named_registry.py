@@ -9,11 +9,12 @@ reads it unchanged."""
 from __future__ import annotations
 
 import warnings
+import weakref
 from scenario_bank.errors import BuiltInReplacedWarning
 from typing import (Callable, Dict, Iterator, List, Mapping, MutableMapping, Optional, Sequence, Type, TypeVar,
                     Union, overload)
 
-__all__ = ["Registry"]
+__all__ = ["Registry", "replaced_built_ins"]
 
 V = TypeVar("V")
 D = TypeVar("D")
@@ -21,6 +22,22 @@ UnknownError = Callable[[str, Sequence[str]], Exception]
 """``unknown(name, known_names) -> error``: the error a registry raises for a name it does not hold."""
 
 _MISSING = object()
+_REGISTRIES: "weakref.WeakValueDictionary[int, Registry]" = weakref.WeakValueDictionary()
+"""Every registry of this process (:func:`replaced_built_ins` reads them all)."""
+
+
+def replaced_built_ins() -> List[str]:
+    """Every built-in entry a plug-in replaced or removed in this process, in any registry, sorted, one phrase
+    each: ``"detector 'collision' (replaced by my_plugins)"``, ``"policy 'rule' (removed)"``."""
+    found = set()
+    for registry in list(_REGISTRIES.values()):
+        for name, module in registry.replaced().items():
+            how = "removed" if module == _REMOVED else f"replaced by {module}" if module else "replaced"
+            found.add(f"{registry.what} {name!r} ({how})")
+    return sorted(found)
+
+
+_REMOVED = "<removed>"
 
 
 class Registry(MutableMapping[str, V]):
@@ -41,14 +58,22 @@ class Registry(MutableMapping[str, V]):
         self._entries: Dict[str, V] = {}
         self._modules: Dict[str, str] = {}
         self._built_in: set = set()
+        self._replaced: Dict[str, Optional[str]] = {}
+        _REGISTRIES[id(self)] = self
         for name, value in (entries or {}).items():
             self.register(name, value)
         self.mark_built_in()
 
     def mark_built_in(self) -> None:
         """Every entry held now is one of the product's own (a module that registers its entries by calls
-        marks them once it has)."""
+        marks them once it has); none of them counts as replaced."""
         self._built_in = set(self._entries)
+        self._replaced = {}
+
+    def replaced(self) -> Dict[str, Optional[str]]:
+        """The built-in entries replaced since they were marked, name -> the module that replaced it (``None``:
+        not known; ``"<removed>"``: removed)."""
+        return dict(self._replaced)
 
     def is_built_in(self, name: str) -> bool:
         """Whether ``name`` is one of the product's own entries (:meth:`mark_built_in`)."""
@@ -66,6 +91,7 @@ class Registry(MutableMapping[str, V]):
         if name in self._built_in:
             warnings.warn(BuiltInReplacedWarning(self.what, name, module), stacklevel=3)
             self._built_in.discard(name)
+            self._replaced[name] = module
         self._entries[name] = value
         if module:
             self._modules[name] = module
@@ -115,6 +141,7 @@ class Registry(MutableMapping[str, V]):
         other._entries = dict(self._entries)
         other._modules = dict(self._modules)
         other._built_in = set(self._built_in)
+        other._replaced = dict(self._replaced)
         return other
 
     # the mapping protocol: ``[]`` and ``del`` raise KeyError as a dict does; ``[] =`` replaces
@@ -130,6 +157,7 @@ class Registry(MutableMapping[str, V]):
         if name in self._built_in:
             warnings.warn(BuiltInReplacedWarning(self.what, name, None, removed=True), stacklevel=3)
             self._built_in.discard(name)
+            self._replaced[name] = _REMOVED
 
     def __contains__(self, name: object) -> bool:
         return name in self._entries

@@ -10,6 +10,10 @@ Each run record also carries its format (:func:`record_format`: a schema name an
 the record's fields change); a record of any other format, or of none, is refused by :func:`check_format` in one
 line saying that another version of dv2s-gym wrote the folder and that a new ``--out`` folder starts the run anew.
 A setting a record does not hold, or holds as ``null``, is ``None``.
+
+A run also records what its scenarios *are* (:func:`bank_identity`: each scenario's script SHA-256, under
+:data:`BANK_IDENTITY`): a resume over a script edited since the run began is refused by :func:`check_bank_unchanged`,
+naming the scenario.
 """
 
 from __future__ import annotations
@@ -18,10 +22,12 @@ import dataclasses
 import json
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
 
+from scenario_bank.dedup import content_hash
 from scenario_bank.errors import DV2SError
 
 __all__ = ["RunIdentityError", "identity_of", "differing", "check_identity", "setting", "resume_keys",
-           "recorded_settings", "record_format", "check_format", "FORMAT_KEYS"]
+           "recorded_settings", "record_format", "check_format", "FORMAT_KEYS", "BANK_IDENTITY", "bank_identity",
+           "check_bank_unchanged"]
 
 _SHOWN = 3
 """Differences spelled out in a refusal (the rest are counted)."""
@@ -159,3 +165,38 @@ def _json_value(field: dataclasses.Field, value: Any) -> Any:
     if isinstance(value, Mapping):
         return dict(value)
     return value
+
+
+# --------------------------------------------------------------------------- the bank's scripts
+BANK_IDENTITY = "bank_identity"
+"""The key under which a run's record holds :func:`bank_identity` of its scenarios."""
+
+
+def bank_identity(bank: Any, names: Sequence[str]) -> Dict[str, str]:
+    """``{scenario: SHA-256 of its script}`` for ``names`` in ``bank`` (a :class:`~scenario_bank.bank.Bank`), sorted
+    by name: the scripts as they are on disk now (the hash ``dv2s bank validate`` compares with an entry's
+    ``content_hash``)."""
+    return {name: content_hash(bank.get(name).script) for name in sorted(set(names))}
+
+
+def check_bank_unchanged(recorded: Optional[Mapping[str, Any]], now: Mapping[str, str], *, run: str,
+                         error: Type[Exception] = RunIdentityError) -> None:
+    """Refuse to resume ``run`` (e.g. ``"out/mine holds a mining run"``) when a scenario's script differs from the
+    one ``recorded`` (:func:`bank_identity` when the run began), or a scenario was added or left out.
+
+    Raises:
+        error: ``"<run> over other scenario scripts (the bank's script for 'x' changed since the run began); restore
+            the script, or start a new --out folder"``.
+    """
+    recorded = dict(recorded or {})
+    changed = sorted(name for name in set(recorded) & set(now) if recorded[name] != now[name])
+    gone = sorted(set(recorded) - set(now))
+    added = sorted(set(now) - set(recorded))
+    if not (changed or gone or added):
+        return
+    said = [f"the bank's script for {name!r} changed since the run began" for name in changed[:_SHOWN]]
+    said += [f"{name!r} was not part of the run" for name in added[:_SHOWN]]
+    said += [f"{name!r} is no longer asked" for name in gone[:_SHOWN]]
+    restore = "the scripts as the run used them" if len(said) > 1 else "the script as the run used it"
+    raise error(f"{run} over other scenario scripts ({'; '.join(said)}); restore {restore}, or start a new --out "
+                "folder")

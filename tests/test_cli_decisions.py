@@ -73,7 +73,7 @@ def test_a_resumed_run_keeps_its_recorded_settings_unless_told_otherwise(tmp_pat
     pytest.importorskip("torch")  # the rl extra
     from policies import training
     recorded = training.TrainConfig.from_json({"out": str(tmp_path), "steps": 5000, "seed": 3, "n_envs": 1})
-    (tmp_path / "run.json").write_text(json.dumps({"schema": "dv2s-train-run", "version": 1,
+    (tmp_path / "run.json").write_text(json.dumps({"schema": "dv2s-train-run", "version": 2,
                                                    "config": recorded.to_json()}))
     resumed = training.run_settings(str(tmp_path), {"steps": 9000, "seed": None}, resume=True)
     assert (resumed.steps, resumed.seed, resumed.n_envs) == (9000, 3, 1)

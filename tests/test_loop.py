@@ -1352,6 +1352,44 @@ def test_a_loop_whose_starting_checkpoint_was_replaced_in_place_is_refused(tmp_p
     assert "restore the policy" in message and message.endswith("or pass a new --out")
 
 
+def test_a_loop_resumed_over_other_plugins_a_changed_reference_or_an_edited_script_is_refused(tmp_path, monkeypatch):
+    """A loop records the code identity, the reference driver's fingerprint and its starting scenarios' scripts: an
+    unchanged loop resumes; a detector a plug-in now replaces, a changed reference driver or an edited script is
+    refused in one line naming it and the fix."""
+    import policies.run_identity as run_identity
+    from scenario_bank.named_registry import replaced_built_ins
+
+    _StandIns(monkeypatch)
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
+    settings = {**WIRING, "min_heldout_episodes": 1, "min_heldout_families": 2}
+    out = tmp_path / "loop"
+    run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **settings)
+    state = json.loads((out / "loop.json").read_text(encoding="utf-8"))
+    assert state["version"] == 2 and sorted(state["bank_identity"]) == sorted(WIRING["scenarios"])
+    assert state["code_identity"]["replaced built-ins"] == replaced_built_ins() == []
+    run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **settings)  # unchanged: resumed
+    real_table, real_fingerprint = run_identity.plugin_table, run_identity.resume_fingerprint
+    monkeypatch.setattr(run_identity, "plugin_table", lambda: {**real_table(), "detectors": {"collision": "mine"}})
+    with pytest.raises(LoopError) as error:
+        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **settings)
+    assert str(error.value).startswith(f"{out} holds a loop made with other code (detectors differ: detectors: run "
+                                       "has {}, now {'collision': 'mine'}); restore the code the run used")
+    monkeypatch.setattr(run_identity, "plugin_table", real_table)
+    edited = {"module policies.rule_based source (SHA-256)": "0" * 64}
+    monkeypatch.setattr(run_identity, "resume_fingerprint",
+                        lambda spec: {**real_fingerprint(spec), **(edited if spec == "rule" else {})})
+    with pytest.raises(LoopError, match=f"^{out} holds a loop whose reference driver rule has changed since"):
+        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **settings)
+    monkeypatch.setattr(run_identity, "resume_fingerprint", real_fingerprint)
+    script = out / "bank" / WIRING["scenarios"][0] / "scenario.scenic"
+    script.write_text(script.read_text(encoding="utf-8") + "\n# edited\n", encoding="utf-8")
+    with pytest.raises(LoopError) as error:
+        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **settings)
+    assert str(error.value) == (f"{out} holds a loop over other scenario scripts (the bank's script for "
+                                f"'{WIRING['scenarios'][0]}' changed since the run began); restore the script as the "
+                                "run used it, or start a new --out folder")
+
+
 @pytest.mark.parametrize("given, meant", [("lead_brak", "highway_lead_vehicle_brakes"), ("my_failure.scenic", None)])
 def test_an_unknown_loop_scenario_says_what_the_loop_takes(tmp_path, capsys, given, meant):
     code, _, err = run(capsys, "loop", "--scenarios", given, "--out", tmp_path / "loop", "--no-progress")

@@ -19,7 +19,10 @@ from dv2s_gym.regress.errors import ReportMismatchError, ResumeMismatchError
 from dv2s_gym.regress.report import SCHEMA, SCHEMA_VERSION, load_report
 from dv2s_gym.regress.store import RunStore
 from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, DAggerResumeError
+from policies.run_identity import code_identity
 from policies.training import TrainConfig, TrainingError, run_settings, train
+from scenario_bank.bank import Bank
+from scenario_bank.run_identity import bank_identity
 
 SCENARIOS = ("highway_lead_vehicle_brakes",)
 
@@ -91,7 +94,8 @@ def test_a_training_folder_of_another_format_is_refused_and_one_of_this_format_r
                          card_seeds=0, checkpoint_freq=0, progress_bar=False, vec_env="dummy")
     assert "learning_rate" not in config.to_json()
     path = out / "run.json"
-    path.write_text(json.dumps({"schema": "dv2s-train-run", "version": 1, "config": config.to_json(),
+    path.write_text(json.dumps({"schema": "dv2s-train-run", "version": 2, "config": config.to_json(),
+                                "bank_identity": bank_identity(Bank(), SCENARIOS), "code_identity": code_identity(),
                                 "segments": []}), encoding="utf-8")
     with pytest.raises(_PastTheCheck):
         train(run_settings(out, {}, resume=True), resume=True, log=_past_the_check)
@@ -101,7 +105,7 @@ def test_a_training_folder_of_another_format_is_refused_and_one_of_this_format_r
         path.write_text(json.dumps(record), encoding="utf-8")
         with pytest.raises(TrainingError) as error:
             run_settings(out, {}, resume=True)
-        assert str(error.value) == _refusal(out, "a training run", "run.json", found, 1)
+        assert str(error.value) == _refusal(out, "a training run", "run.json", found, 2)
 
 
 _PROGRESS = {"schema": "dv2s-dagger-checkpoint", "identity": {"seed": 0}, "iteration": 0, "history": [], "rng": {},
@@ -123,7 +127,7 @@ def test_a_dagger_checkpoint_of_another_format_is_refused(tmp_path, format_keys,
     assert str(error.value) == _refusal(folder, "the checkpoint of an unfinished DAgger run", "progress.json", found, 2)
 
 
-@pytest.mark.parametrize("format_keys, found", [({"version": 1}, "format 1"), ({}, "no format")])
+@pytest.mark.parametrize("format_keys, found", [({"version": 2}, "format 2"), ({}, "no format")])
 def test_a_regression_folder_of_another_format_is_refused_and_one_of_this_format_resumes(tmp_path, format_keys,
                                                                                           found):
     settings = {"episodes": 4, "seed": 0, "scenarios": ["a"]}
@@ -136,7 +140,7 @@ def test_a_regression_folder_of_another_format_is_refused_and_one_of_this_format
     path.write_text(json.dumps({**record, **format_keys}))
     with pytest.raises(ResumeMismatchError) as error, RunStore(tmp_path, settings) as store:
         store.open()
-    assert str(error.value) == _refusal(tmp_path, "a regression run", "run.json", found, 2)
+    assert str(error.value) == _refusal(tmp_path, "a regression run", "run.json", found, 3)
 
 
 def test_a_regress_report_of_another_schema_version_is_refused(tmp_path):

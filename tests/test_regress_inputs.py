@@ -132,15 +132,17 @@ def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, m
     (tmp_path / "weights.json").write_text('{"w": 1}')
     spec = "helped_policy_here:make?weights=weights.json"
     before = identity.policy_fingerprint(spec)
-    assert before["dv2s version"] and before["dv2s sources (SHA-256)"]
+    assert before["dv2s version"]
     (tmp_path / "stealth_cfg.py").write_text("ACTION = 4\n")  # the helper the module imports changed
     (tmp_path / "weights.json").write_text('{"w": 2}')  # the data file an option names changed
     after = identity.policy_fingerprint(spec)
     changed = sorted(key for key in before.keys() | after.keys() if before.get(key) != after.get(key))
     assert changed == [f"module file {(tmp_path / 'stealth_cfg.py').resolve()} (SHA-256)",
                        "option weights file weights.json (SHA-256)"]
-    monkeypatch.setattr(identity, "dv2s_sources_sha256", lambda: "edited simulator")
-    assert identity.policy_fingerprint("rule")["dv2s sources (SHA-256)"] == "edited simulator"
+    from policies import run_identity
+
+    monkeypatch.setattr(run_identity, "dv2s_sources_sha256", lambda: "edited simulator")
+    assert run_identity.code_identity()["dv2s sources (SHA-256)"] == "edited simulator"
 
 
 @pytest.mark.slow

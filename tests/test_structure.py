@@ -379,8 +379,6 @@ NAMED_NOT_LOADED: Dict[Tuple[str, str], str] = {
                                                          "metadrive.model), compiled by Scenic, not imported here",
     ("envs.jail_worker", "policies"): "the prefix a driver class path it is sent must start with (a check; the "
                                       "driver is loaded by the name its caller sends, COMPUTED_LOADS)",
-    ("dv2s_gym.regress.identity", "envs"): "the project's packages whose sources it hashes (paths)",
-    ("dv2s_gym.regress.identity", "policies"): "the project's packages whose sources it hashes (paths)",
     ("policies.run_identity", "envs"): "the project's packages whose files are not a policy's helpers (paths)",
     ("policies.run_identity", "scenario_bank"): "the project's packages whose files are not a policy's helpers "
                                                 "(paths)",

@@ -104,11 +104,13 @@ from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
 from scenario_bank.records import EpisodeRecord, HeldOutEpisode, RecordError
-from scenario_bank.run_identity import check_format, check_identity, record_format
+from scenario_bank.run_identity import (BANK_IDENTITY, bank_identity, check_bank_unchanged, check_format,
+                                       check_identity, record_format)
 from policies.evaluation import EVAL_SEED_BASE
 from policies.card_record import FineTune, FineTuneMethod
 from policies.registry import SB3_ALGORITHMS, read_model_card
-from policies.run_identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
+from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, check_code_unchanged, check_policy_unchanged,
+                                   code_identity, resume_fingerprint)
 
 __all__ = ["LoopError", "LoopReport", "LoopSettings", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries",
            "fine_tune_weights", "arm_weights", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES"]
@@ -120,6 +122,9 @@ IDENTITY = ("policy",) + LoopSettings.resume_keys()
 """The settings of ``loop.json`` a resumed loop must share with the recorded ones."""
 HOLDOUT_BY = "family"
 """How a loop splits its mined scenarios (recorded in ``loop.json``)."""
+REFERENCE_FINGERPRINT = "reference_fingerprint"
+"""The key under which ``loop.json`` records the reference driver's
+:func:`~policies.run_identity.resume_fingerprint`."""
 STATE_SCHEMA = "dv2s-loop-state"
 STATE_VERSION = 2
 """The format of ``loop.json`` (bumped when its fields change; a loop folder of another format is refused)."""
@@ -187,10 +192,14 @@ class _State:
                            fix="rerun with its settings to resume it, or choose another --out")
             # the same spec naming a checkpoint replaced in place is refused, naming what changed
             check_policy_unchanged(recorded, settings["policy"], folder=path.parent, run="loop", error=LoopError)
+            check_policy_unchanged(data, REFERENCE_DRIVER, folder=path.parent, run="loop", error=LoopError,
+                                   key=REFERENCE_FINGERPRINT, role="reference driver")
+            check_code_unchanged(data, run=f"{path.parent} holds a loop", error=LoopError)
             data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY})  # what may change
             data.update({key: _in_folder(data[key], path.parent, write=False) for key in ("start", "rounds")})
         else:
-            data = {**record_format(STATE_SCHEMA, STATE_VERSION), "settings": settings, "start": None, "rounds": []}
+            data = {**record_format(STATE_SCHEMA, STATE_VERSION), "settings": settings, "start": None, "rounds": [],
+                    REFERENCE_FINGERPRINT: resume_fingerprint(REFERENCE_DRIVER), CODE_IDENTITY: code_identity()}
         self.rounds: List[RoundRecord] = _read_rounds(data.pop("rounds"), path)
         self.settings: RecordedLoopSettings = _read_part(RecordedLoopSettings, data.pop("settings"), path)
         start = data.pop("start", None)
@@ -542,6 +551,12 @@ def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, l
         if not names:
             raise LoopError("the scenario selection is empty; name bank scenarios or tag:<tag>")
         state.start = LoopStart(bank=bank, scenarios=tuple(names))
+        state.save()
+    scripts = bank_identity(Bank(bank), state.start.scenarios)  # the starting scenarios of the working bank
+    if BANK_IDENTITY in state.extra:
+        check_bank_unchanged(state.extra[BANK_IDENTITY], scripts, run=f"{out} holds a loop", error=LoopError)
+    else:
+        state.extra[BANK_IDENTITY] = scripts
         state.save()
     return _Loop(settings=settings, state=state, out=out, bank=bank, start_names=list(state.start.scenarios),
                  env_config=env_config, fine_tune_config=fine_tune_config, workers=workers, progress=progress, log=log)

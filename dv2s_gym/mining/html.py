@@ -27,7 +27,7 @@ from dv2s_gym.mining.behaviour import Behaviour
 from dv2s_gym.mining.conversion.record import ConversionStatus
 from dv2s_gym.mining.report_record import ClusterEntry, FailureEntry, mine_report, MineReport
 from dv2s_gym.mining.report_text import (breadth, by_type_text, clip_caption, parameter_check_text, rate_text,
-                                         seed_text)
+                                         replaced_in, replaced_text, seed_text)
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
                                   fmt, fmt_interval, interval_mark, legend, row_label, svg, video_tag, x_scale)
 from scenario_bank.atomic import atomic_write_text
@@ -168,6 +168,8 @@ def _banner(report: MineReport) -> str:
               f"rejected {counts.rejected}"]
     if counts.errors:
         detail.append(f"{counts.errors} error(s)")
+    if replaced_in(settings):
+        detail.append(replaced_text(replaced_in(settings)))
     return f'<div class="banner {css}" id="summary">{escape(head)}<small>{escape("; ".join(detail))}</small></div>'
 
 

@@ -63,7 +63,7 @@ from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import JsonlAppender
 from dv2s_gym.mining.monitors import kind_label, types_without_detector
 from dv2s_gym.mining.report import write_reports
-from dv2s_gym.mining.report_text import error_warning
+from dv2s_gym.mining.report_text import error_warning, replaced_text
 from dv2s_gym.mining.sampling.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
 from dv2s_gym.mining.settings import (DEFAULT_BATCH, FEEDBACKS, MineSettings, read_run_settings, RunOrigin,
                                       RunSettings, SETTINGS_FILE)
@@ -76,23 +76,29 @@ from dv2s_gym.workers.pool import default_workers
 from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 from scenario_bank.bank import Bank, BankError
+from scenario_bank.named_registry import replaced_built_ins
 from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, JsonRecord, RecordError
 from scenario_bank.failure_types import failure_table
 from scenario_bank.jail import JailUnavailableError, require_jail
-from scenario_bank.run_identity import check_format, check_identity, record_format
+from scenario_bank.run_identity import (BANK_IDENTITY, bank_identity, check_bank_unchanged, check_format,
+                                       check_identity, record_format)
 from policies.registry import load_policy
-from policies.run_identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
+from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, check_code_unchanged, check_policy_unchanged,
+                                   code_identity, resume_fingerprint)
 
 __all__ = ["MineRun", "MineSettings", "RunOrigin", "WorkerSettings", "FEEDBACKS", "mine", "read_records",
            "episode_seed", "SETTINGS_VERSION", "progress_bar"]
 
 SETTINGS_SCHEMA = "dv2s-mine"
-SETTINGS_VERSION = 2
+SETTINGS_VERSION = 3
 """The format of a mining run's ``settings.json`` (bumped when its fields change; a run folder of another format is
 refused on resume)."""
 LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
+REFERENCE_FINGERPRINT = "reference_fingerprint"
+"""The key under which ``settings.json`` records the reference driver's
+:func:`~policies.run_identity.resume_fingerprint`."""
 _RESUME_KEYS = ("policy",) + MineSettings.resume_keys()
 """The keys of ``settings.json`` a resumed run must share with the recorded ones."""
 _SPACE_KEYS = ("scenarios",)
@@ -175,6 +181,8 @@ class MineRun:
             f"pairs, {len({record_family(r) for r in failures})} scenario families with a failure; "
             f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
         ]
+        if replaced_built_ins():  # what the counts above count under a replaced name is a plug-in's
+            lines.append(replaced_text(replaced_built_ins()))
         if self.conversions:
             lines.append(f"converted {len(self.conversions)}: kept {status[ConversionStatus.KEPT]}, merged "
                          f"{status[ConversionStatus.MERGED]}, rejected {status[ConversionStatus.REJECTED]}")
@@ -260,11 +268,16 @@ class _Recorder:
 def _recorded(policy: str, settings: MineSettings, scenarios: Sequence[str],
               space_description: Dict[str, Any]) -> Dict[str, Any]:
     """The run's ``settings.json``: :meth:`MineSettings.recorded` (with the run's resolved batch and bank) with the
-    policy, the ``scenarios`` (the keys :data:`_RESUME_KEYS` name are its identity) and the policy's fingerprint
-    (:func:`~policies.run_identity.resume_fingerprint`: a resume with a changed checkpoint or module is refused)."""
+    policy, the ``scenarios`` (the keys :data:`_RESUME_KEYS` name are its identity), the fingerprints of the policy
+    and of the reference driver (:func:`~policies.run_identity.resume_fingerprint`: a resume with a changed checkpoint
+    or module is refused), the scenarios' scripts (:func:`~scenario_bank.run_identity.bank_identity`) and the code
+    (:func:`~policies.run_identity.code_identity`: dv2s's sources, plug-ins, detectors, replaced built-ins)."""
+    reference = settings.reference
     return {**record_format(SETTINGS_SCHEMA, SETTINGS_VERSION), "policy": policy, **settings.recorded(),
             "batch": int(settings.batch), "scenarios": list(scenarios), "space": space_description,
-            RESUME_FINGERPRINT: resume_fingerprint(policy)}
+            RESUME_FINGERPRINT: resume_fingerprint(policy),
+            REFERENCE_FINGERPRINT: resume_fingerprint(reference) if reference else None,
+            BANK_IDENTITY: bank_identity(Bank(settings.bank_dir), scenarios), CODE_IDENTITY: code_identity()}
 
 
 @dataclass(frozen=True)
@@ -630,12 +643,18 @@ def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[R
         _check_resume(saved.values, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
         # the same spec naming a changed checkpoint or module is refused, naming what changed
         check_policy_unchanged(saved.values, policy, folder=out, run="mining run", error=MiningError)
+        if settings.reference:
+            check_policy_unchanged(saved.values, settings.reference, folder=out, run="mining run", error=MiningError,
+                                   key=REFERENCE_FINGERPRINT, role="reference driver")
+        check_code_unchanged(saved.values, run=f"{out} holds a mining run", error=MiningError)
     names = saved.scenarios if saved and settings.scenarios is None else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
     space = space_module.SceneSpace(names or asked, settings.bank_dir)
     recorded = _recorded(policy, settings, space.scenarios, space.describe())
     if saved is not None:
         _check_resume(saved.values, recorded, out)
+        check_bank_unchanged(saved.values.get(BANK_IDENTITY), recorded[BANK_IDENTITY],
+                             run=f"{out} holds a mining run", error=MiningError)
     schedule = _schedule(saved, settings.sampler, out)
     recorded["schedule"] = schedule
     if origin is not None:

@@ -233,7 +233,7 @@ def register_detector(detector: Detector, overwrite: bool = False) -> Detector:
     DETECTORS.register(detector.name, detector, overwrite=overwrite, module=module)
     remember_plugin(_plugin_name(detector.name), module)
     attach_detection(detector.name, lambda result, trace, settings: detector.detect(
-        result, trace, MonitorSettings.of(settings)) is not None)
+        result, trace, MonitorSettings.of(settings)) is not None, module)
     return detector
 
 

@@ -107,7 +107,8 @@ from dv2s_gym.mining.sampling.rate import FailureRate, rate_estimates
 from dv2s_gym.mining.report_record import (ClusterEntry, EpisodeError, FailureEntry, mine_report, MineReport,
                                            RejectedConversion, ScenarioSummary, WorkerRestart)
 from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, by_type_text, error_warning,
-                                         not_compared_counts, parameter_check_text, rate_text, seed_text)
+                                         not_compared_counts, parameter_check_text, rate_text, replaced_in,
+                                         replaced_text, seed_text)
 from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.settings import read_run_settings, RunSettings, SETTINGS_FILE
 from dv2s_gym.mining.report_text import percent_text as _pct
@@ -630,7 +631,8 @@ def headline(report: MineReport) -> str:
             f"({counts.avoidable_clusters} avoidable); converted {counts.converted}: kept {counts.kept}, "
             f"merged {counts.merged}, rejected {counts.rejected}"
             + (f"; {counts.errors} error(s)" if counts.errors else "")
-            + (f". {_error_alarm(report)}" if counts.errors else ""))
+            + (f". {_error_alarm(report)}" if counts.errors else "")
+            + (f". {replaced_text(replaced_in(settings))}" if replaced_in(settings) else ""))
 
 
 def _error_alarm(report: MineReport) -> str:

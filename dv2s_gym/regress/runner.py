@@ -40,7 +40,7 @@ from dv2s_gym.regress.report import (
 )
 from dv2s_gym.regress.outputs import write_reports
 from dv2s_gym.regress.identity import policy_fingerprint
-from policies.run_identity import installed_version
+from policies.run_identity import code_identity, installed_version
 from dv2s_gym.regress.store import RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
 from dv2s_gym.regress.tasks import KIND
@@ -368,13 +368,17 @@ def _identity(plan: _Plan, settings: RegressSettings) -> Dict[str, Any]:
     identity: Dict[str, Any] = {
         "candidate": plan.candidate, "baseline": plan.baseline_spec, "baseline_report": plan.report_hash,
         "baseline_role": plan.report.role if plan.report is not None else None,
-        "bank_version": plan.bank.version, "scenarios": plan.names, "episodes": plan.episodes,
+        "scenarios": plan.names, "episodes": plan.episodes,
         "seed": settings.seed, "env_config": plan.env_config, "sequential": bool(settings.sequential),
         "failure": plan.failure, "stall_seconds": float(settings.stall_seconds),
     }
+    # each scenario's script (scenario_bank.run_identity.bank_identity): a refusal names the scenario whose changed
+    identity.update({f"the bank's script for {name!r} (SHA-256)": script
+                     for name, script in (plan.bank.hashes or {}).items()})
     for role, spec in (("candidate", plan.candidate), ("baseline", plan.baseline_spec)):
         if spec is not None:  # what the policy is, not what it is called
             identity.update({f"{role} {key}": value for key, value in policy_fingerprint(spec).items()})
+    identity.update(code_identity())  # dv2s's sources, the plug-ins, their detectors, the built-ins they replaced
     if settings.sequential:  # the stopping point depends on these
         identity.update(margin=float(settings.margin), alpha=float(settings.alpha), batch=plan.batch)
     return identity

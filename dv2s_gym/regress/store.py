@@ -31,7 +31,7 @@ RUN_FILE = "run.json"
 RESULTS_FILE = "results.jsonl"
 TRACES_DIR = "traces"
 _RUN_SCHEMA = "dv2s-regress-run"
-_RUN_VERSION = 2
+_RUN_VERSION = 3
 """The format of ``run.json`` (bumped when its fields change; a run folder of another format is refused)."""
 
 Key = Tuple[str, str]  # (episode id, role)
