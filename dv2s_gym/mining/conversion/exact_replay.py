@@ -173,7 +173,7 @@ def _checkpoint_sha256(policy: Any) -> Optional[str]:
 _VERSION_FACTS = (("policy_sha256", "the policy checkpoint differs from the one that failed (SHA-256 {now} now, "
                                     "{then} when recorded)"),
                   ("dv2s_gym_version", "dv2s-gym is version {now} now, {then} when recorded"),
-                  ("dv2s_sources_sha256", "dv2s-gym's simulator or policy sources changed since it was recorded "
+                  ("dv2s_sources_sha256", "dv2s-gym's sources changed since it was recorded "
                                           "(an edited or updated install)"),
                   ("trace_version", "the trace format is version {now} now, {then} when recorded"))
 
