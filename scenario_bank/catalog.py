@@ -88,13 +88,13 @@ def select_scenarios(selector: Union[None, str, Sequence[str]], bank_dir: Option
     ``command`` names a command that takes bank names and tags only (``"dv2s mine"``): an unknown item's error
     then says so (no ``.scenic`` paths or Scenic text) and suggests the bank's nearest names."""
     bank = open_bank(bank_dir)
+    if not len(bank) and (selector is None or not bank.problems):  # no bank there: said before a name is looked up
+        root = Path(bank.root)
+        where = ("the folder does not exist" if not root.exists() else "it is a file" if not root.is_dir()
+                 else "the folder holds no scenarios")
+        raise UnknownScenarioError(f"there is no bank at {bank.root} ({where}); check the --bank path, or leave "
+                                   "--bank out for the shipped bank")
     if selector is None:
-        if not len(bank):
-            root = Path(bank.root)
-            where = ("the folder does not exist" if not root.exists() else "it is a file" if not root.is_dir()
-                     else "the folder holds no scenarios")
-            raise UnknownScenarioError(f"there is no bank at {bank.root} ({where}); check the --bank path, or leave "
-                                       "--bank out for the shipped bank")
         return bank.names()
     items = [selector] if isinstance(selector, str) else list(selector)
     selected: List[str] = []

@@ -102,6 +102,15 @@ def test_mining_a_bank_that_does_not_exist_names_it(tmp_path, capsys):
     assert not (tmp_path / "typo").exists() and not (tmp_path / "run").exists()
 
 
+def test_mining_named_scenarios_of_a_bank_that_does_not_exist_names_the_bank(tmp_path, capsys):
+    code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--no-convert", "--scenarios",
+                       "highway_lead_vehicle_brakes", "--bank", tmp_path / "typo", "--out", tmp_path / "run",
+                       "--no-progress")
+    line = one_line_error(err)  # not "the bank ... holds no scenario 'highway_lead_vehicle_brakes'"
+    assert code == 2 and "there is no bank at" in line and "the folder does not exist" in line
+    assert not (tmp_path / "typo").exists() and not (tmp_path / "run").exists()
+
+
 @pytest.mark.slow
 def test_an_unreachable_ray_cluster_is_one_line_and_leaves_no_run_folder(tmp_path, capsys):
     from llm_server import closed_port_url
