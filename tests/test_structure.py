@@ -546,6 +546,55 @@ def test_loaders_are_given_literal_module_names():
     assert not stale, f"COMPUTED_LOADS lists modules that compute no loaded name any more: {stale}"
 
 
+_FILE_LOADERS = {"spec_from_file_location", "spec_from_loader", "SourceFileLoader", "SourcelessFileLoader",
+                 "ExtensionFileLoader", "exec_module", "load_module", "machinery", "zipimport", "exec", "execfile"}
+"""Ways to run Python code given by a file path or as text, which no import rule can follow (the loaded module's
+name is whatever the caller says). No product module needs one, but those of :data:`FILE_LOADS`."""
+
+FILE_LOADS = {"scenario_bank.jail.probe": "runs, inside the jail, the code text the jail's own tests send it "
+                                          "(no product code starts it)"}
+"""Product modules that run code text or load a file by path, each with its reason."""
+
+
+def _file_loads(tree: ast.AST) -> List[str]:
+    """``"<line>: <code>"`` for every use of a :data:`_FILE_LOADERS` name in ``tree`` (a name, an attribute or an
+    imported name)."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and node.id in _FILE_LOADERS or (
+                isinstance(node, ast.Attribute) and node.attr in _FILE_LOADERS):
+            found.append(f"{node.lineno}: {ast.unparse(node)}")
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            names = [alias.name for alias in node.names] + [getattr(node, "module", None) or ""]
+            if any(part in _FILE_LOADERS for name in names for part in name.split(".")):
+                found.append(f"{node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_no_product_module_loads_code_by_file_path_or_text():
+    """The import rules read module names; code loaded from a file path (``importlib.util.spec_from_file_location``
+    and ``exec_module``, ``SourceFileLoader``, ``runpy.run_path`` is checked apart) or run from text (``exec``)
+    would reach any module past them, so the product does neither."""
+    found = {module: lines for module, path in sorted(_modules().items()) if (lines := _file_loads(_parsed(path)))}
+    unlisted = {module: lines for module, lines in found.items() if module not in FILE_LOADS}
+    assert not unlisted, f"product modules load code by file path or run code text (import it by name): {unlisted}"
+    assert sorted(FILE_LOADS) == sorted(found), "FILE_LOADS lists a module that loads nothing by path any more"
+
+
+def test_the_file_load_check_sees_a_module_loaded_by_path():
+    tree = ast.parse(textwrap.dedent('''
+        import importlib.util
+        from importlib.machinery import SourceFileLoader
+        def load(target):
+            spec = importlib.util.spec_from_file_location("runner", target)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            exec(compile("x = 1", "<text>", "exec"))
+            return module
+        '''))
+    assert [line.partition(":")[0] for line in _file_loads(tree)] == ["3", "5", "7", "8"]
+
+
 def test_the_loader_check_sees_computed_and_indirect_loads():
     tree = ast.parse(textwrap.dedent('''
         import importlib
