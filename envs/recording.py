@@ -12,7 +12,7 @@ import numpy as np
 from scenario_bank.atomic import atomic_path
 from scenario_bank.errors import DV2SError, SettingError
 
-__all__ = ["VideoWriter", "VideoFormatError", "VideoEncoderError", "record_episode", "video_codecs", "write_frames"]
+__all__ = ["VideoWriter", "VideoFormatError", "VideoEncoderError", "record_episode", "write_frames"]
 
 class VideoFormatError(DV2SError, ValueError):
     """A video path whose extension no codec here writes; the message lists the ones that work."""
@@ -23,11 +23,6 @@ class VideoEncoderError(DV2SError, RuntimeError):
 
 
 _CODECS = {".webm": "VP80", ".mp4": "avc1", ".avi": "MJPG", ".mkv": "VP80"}
-
-
-def video_codecs() -> dict:
-    """File extension -> FourCC used when writing that container."""
-    return dict(_CODECS)
 
 
 @contextmanager

@@ -123,7 +123,6 @@ __all__ = [
     "ConvertedNetwork",
     "convert_network",
     "load_road_network",
-    "clear_road_network_cache",
     "scenic_successors",
     "STRAIGHT_TOLERANCE",
 ]
@@ -1013,9 +1012,3 @@ def load_road_network(map_path: Union[str, Path]) -> ConvertedNetwork:
             del _CACHE[old]
         _CACHE[key] = converted
     return converted
-
-
-def clear_road_network_cache() -> None:
-    """Forget every network loaded by :func:`load_road_network`."""
-    with _CACHE_LOCK:
-        _CACHE.clear()

@@ -12,7 +12,7 @@ from typing import Any, Dict, Optional, Tuple
 from policies.evaluation import make_eval_env
 from policies.registry import load_policy
 
-__all__ = ["env_for", "policy_for", "drop_env", "clear_caches"]
+__all__ = ["env_for", "policy_for", "drop_env"]
 
 _ENVS: Dict[Tuple[Optional[str], str], Any] = {}
 _POLICIES: Dict[Tuple[str, str, Optional[str], str], Any] = {}
@@ -59,9 +59,3 @@ def drop_env(env_key: Tuple[Optional[str], str]) -> None:
             env.close()
         except Exception:  # closing a broken env must not hide the episode's error
             pass
-
-
-def clear_caches() -> None:
-    """Close every cached env and forget the loaded policies."""
-    for key in list(_ENVS):
-        drop_env(key)

@@ -5,6 +5,7 @@ field of the wrong kind is named."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -139,3 +140,5 @@ def test_the_report_format_documented_in_the_module_is_the_version_written():
     doc = report_module.__doc__
     assert f"version {report_module.SCHEMA_VERSION} (:data:`SCHEMA_VERSION`" in doc
     assert f'"schema_version": {report_module.SCHEMA_VERSION},' in doc
+    page = (Path(__file__).resolve().parents[1] / "docs" / "regress.md").read_text()
+    assert re.findall(r"schema `dv2s-regress` version (\d+)", page) == [str(report_module.SCHEMA_VERSION)]

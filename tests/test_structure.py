@@ -2945,3 +2945,66 @@ def test_a_private_raise_of_a_project_error_is_no_finding(tmp_path):
     copy.write_text(modules[target].read_text(encoding="utf-8") + "\n\ndef _planted(x):\n"
                     "    raise TraceFileError(f'bad {x}')\n", encoding="utf-8")
     assert not built_in_raises({target: copy})
+
+
+REACHED_BY_NAME = {
+    # Scenic scripts written for CARLA call these actions by name (the CARLA facade's interface)
+    "envs.scenic_highway.carla.actions": {"unfreezeTrafficLights", "setAllIntersectionTrafficLightsStatus",
+                                          "setTrafficLightStatus", "getTrafficLightStatus"},
+    # pytest calls its hooks by name
+    "dv2s_gym.regress.pytest_plugin": {"pytest_addoption", "pytest_configure", "pytest_runtest_call"},
+}
+"""Public functions that nothing in the repository names because their caller finds them by name."""
+
+PUBLIC_API = {
+    "scenario_bank.run_identity": {"identity_of"},  # the identity part of a settings mapping, for users' run kinds
+    "scenario_bank.elements": {"empty_elements"},  # the element record a DRA backend starts from
+    "scenario_bank.jail.process": {"discard_spares"},  # frees the warm jailed workers (a long-lived user process)
+    "scenario_bank.jail.zygote": {"zygote_status"},  # whether jailed workers start from a warm zygote here
+    "envs.registration": {"make_env"},  # DV2S-v0 without gym.make's wrappers
+    "envs.coordinates": {"scenic_heading_vector", "hw_heading_vector"},  # the two frames' headings, for users
+    "dv2s_gym.story": {"story_rate"},  # one scenario's story rate for one ego, as the bank's story table measures
+    "dv2s_gym.pipeline.video": {"frames_to_data_urls"},  # a clip as a VLM's image inputs, for DRA backends
+    "dv2s_gym.mining.cluster": {"pair_of"},  # a failure's (scenario family, failure type) pair
+    "dv2s_gym.mining.conversion.interaction": {"shows_interaction"},  # the judge's interaction test on one script
+}
+"""Public functions the product itself does not call, kept as API for users (each with what it is for)."""
+
+
+def _unnamed_public_functions() -> Dict[str, List[str]]:
+    """``{module: [name, ...]}``: top-level public functions and classes of the product that their own module does
+    not use and that no other product module, Scenic model, doc page or ``pyproject.toml`` names."""
+    words = {module: set(re.findall(r"\w+", path.read_text())) for module, path in _modules().items()}
+    texts = [p.read_text() for package in PACKAGES for p in (ROOT / package).rglob("*.scenic")]
+    texts += [p.read_text() for p in (ROOT / "docs").rglob("*.md")]
+    texts += [(ROOT / name).read_text() for name in ("README.md", "pyproject.toml")]
+    other_words = set(re.findall(r"\w+", "\n".join(texts)))
+    found: Dict[str, List[str]] = {}
+    for module, path in sorted(_modules().items()):
+        tree = _parsed(path)
+        used = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)}
+        used |= {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)}
+        for node in tree.body:
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                continue
+            if node.name.startswith("_") or node.name in used or node.name in other_words:
+                continue
+            if not any(node.name in named for other, named in words.items() if other != module):
+                found.setdefault(module, []).append(node.name)
+    return found
+
+
+def test_every_public_function_has_a_user():
+    """A public function or class that nothing calls is dead code, unless its caller finds it by name
+    (:data:`REACHED_BY_NAME`) or it is API kept for users (:data:`PUBLIC_API`, each with what it is for). Tests
+    do not count as users."""
+    found = _unnamed_public_functions()
+    listed = {module: REACHED_BY_NAME.get(module, set()) | PUBLIC_API.get(module, set())
+              for module in set(REACHED_BY_NAME) | set(PUBLIC_API)}
+    dead = {module: unlisted for module, names in found.items()
+            if (unlisted := [n for n in names if n not in listed.get(module, set())])}
+    assert not dead, ("public functions nothing in the product, its Scenic models or its docs uses (delete them, or "
+                      f"list them in PUBLIC_API with what they are for): {dead}")
+    stale = {module: sorted(names - set(found.get(module, ()))) for module, names in listed.items()
+             if names - set(found.get(module, ()))}
+    assert not stale, f"REACHED_BY_NAME/PUBLIC_API list names that are used now, or gone: {stale}"

@@ -27,7 +27,7 @@ import os
 import socket
 import tempfile
 
-__all__ = ["DENIED_SYSCALLS", "build_filter", "filter_bytes", "filter_fd", "seccomp_available"]
+__all__ = ["DENIED_SYSCALLS", "build_filter", "filter_bytes", "filter_fd"]
 
 DENIED_SYSCALLS = (
     "fork", "vfork", "ptrace", "process_vm_readv", "process_vm_writev", "unshare", "setns", "mount",
@@ -45,15 +45,6 @@ _CLONE_THREAD = 0x00010000
 _TIOCSTI = 0x5412
 
 _CACHE: dict = {}
-
-
-def seccomp_available() -> bool:
-    """Whether libseccomp and its Python binding can build the filter here."""
-    try:
-        filter_bytes()
-    except Exception:
-        return False
-    return True
 
 
 def build_filter():

@@ -19,7 +19,7 @@ and how it enters the expression there (``scaled`` next to ``*`` or ``/``, ``sub
 parameter reaches the object only through a top-level variable's computation). An expression that is an affine
 function of the one parameter alone (``globalParameters.g + 10``, ``2 * globalParameters.h``,
 ``-(globalParameters.d - 1) / 2``: numbers, ``+ - * /`` by numbers and unary minus, nested) sets the quantity to a
-known function of it: such a use counts as ``additive`` and :func:`affine_uses` keeps the function, so the judge
+known function of it: such a use counts as ``additive`` and its quantity keeps the function, so the judge
 compares the interval the expression produces rather than the parameter's own range; :func:`quantity_uses` lists
 every use with the quantity it sets as such a function (``abs(...)`` of one read exactly too) or ``None`` when it
 cannot be read so (another sampled value or reference point beside the parameter, a call, ``%``, a conditional).
@@ -52,7 +52,7 @@ from dv2s_gym.mining.conversion.scenic_values import (Quantity, affine_node, is_
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
-           "script_parameters", "affine_uses", "Affine", "quantity_uses", "key_parameters", "key_uses",
+           "script_parameters", "quantity_uses", "key_parameters", "key_uses",
            "actor_objects", "counterpart_objects", "fixed_quantities", "script_objects",
            "behaviour_overrides", "object_behaviour_heads", "DEFAULT_LENGTHS", "object_lengths", "placements",
            "lengths_along"]
@@ -69,9 +69,6 @@ _SKIP = ("behavior", "def", "param", "model", "import", "from", "require", "moni
 
 Use = Tuple[str, str, str, str, frozenset]
 """``(object name, its kind, slot, how, the parameters in the same expression)``."""
-
-Affine = Tuple[float, float, str]
-"""``(scale, offset, the expression's text)``: a quantity set to ``scale * parameter + offset``."""
 
 
 
@@ -398,19 +395,6 @@ def quantity_uses(script: str) -> Dict[str, Dict[Tuple[str, str, str], List[Quan
     actor placed along the same direction from the point (``ahead of spot by 5``) adds to it, so that use is not
     read (and its ``how`` says so)."""
     return _read_uses(script)[1]
-
-
-def affine_uses(script: str) -> Dict[str, Dict[Tuple[str, str, str], Affine]]:
-    """``{parameter: {(object, kind, slot): (scale, offset, expression)}}``: the uses of :func:`quantity_uses`
-    whose quantity is an affine function of the parameter alone (the bare parameter is ``(1, 0, ...)``), one per
-    object and slot."""
-    out: Dict[str, Dict[Tuple[str, str, str], Affine]] = {}
-    for param, by_slot in quantity_uses(script).items():
-        for where, found in by_slot.items():
-            for _, quantity, text in found:
-                if quantity is not None and quantity.key[0] == "affine":
-                    out.setdefault(param, {})[where] = (quantity.key[1], quantity.key[2], text)
-    return out
 
 
 def _slot_base(slot: str) -> str:
