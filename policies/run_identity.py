@@ -214,14 +214,25 @@ _CODE_GROUPS = (("dv2s sources", "dv2s sources"), ("plug-in modules", "plug-in m
 """How a difference is named in a refusal: the first group whose prefix a fact's key starts with."""
 
 
+_SOURCE_SUFFIXES = (".py", ".scenic", ".xodr", ".json")
+"""What of dv2s's packages decides how a run goes: its code, the Scenic world models, the OpenDRIVE maps and the
+records of the shipped bank and the loop's untouched set."""
+_NOT_SOURCES = ("dv2s_gym/evalset", "policies/checkpoints")
+"""Data no run reads (the evaluation set) or that a run fingerprints apart (a policy's checkpoint)."""
+
+
 def dv2s_sources_sha256() -> str:
-    """One SHA-256 over every ``.py`` file of dv2s's four packages (``envs``, ``dv2s_gym``, ``policies``,
-    ``scenario_bank``): their paths and contents."""
+    """One SHA-256 over dv2s's four packages (``envs``, ``dv2s_gym``, ``policies``, ``scenario_bank``): the paths
+    and contents of every ``.py``, ``.scenic``, ``.xodr`` and ``.json`` file in them, but the evaluation set and the
+    shipped checkpoint."""
     digest = hashlib.sha256()
+    skipped = [_DV2S_ROOT / folder for folder in _NOT_SOURCES]
     for package in _DV2S_PACKAGES:
         root = _DV2S_ROOT / package
-        for path in sorted(root.rglob("*.py")) if root.is_dir() else []:
-            if "__pycache__" in path.parts:
+        for path in sorted(root.rglob("*")) if root.is_dir() else []:
+            if path.suffix not in _SOURCE_SUFFIXES or "__pycache__" in path.parts or not path.is_file():
+                continue
+            if any(folder in path.parents for folder in skipped):
                 continue
             digest.update(str(path.relative_to(_DV2S_ROOT)).encode() + b"\0" + file_sha256(path).encode() + b"\n")
     return digest.hexdigest()

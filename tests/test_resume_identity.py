@@ -302,3 +302,25 @@ def test_a_mining_reports_banner_names_the_builtins_plugins_replaced(replaced, s
     texts = (format_summary(report), markdown(report), render_html(report).replace("&#x27;", "'"))
     for text in texts:
         assert (said in text) if said else ("replaced by plug-ins" not in text)
+
+
+def test_the_sources_hash_covers_the_world_models_maps_and_records_but_not_the_evaluation_set(tmp_path, monkeypatch):
+    """An edited Scenic world model or map changes how every scenario runs, so it is part of "dv2s sources"."""
+    files = {"envs/code.py": "x = 1\n", "envs/scenic_highway/model.scenic": "class Car: pass\n",
+             "scenario_bank/maps/town.xodr": "<OpenDRIVE/>\n", "dv2s_gym/loop/untouched/a/meta.json": "{}\n",
+             "dv2s_gym/evalset/item.label.json": "{}\n", "policies/checkpoints/p/model_card.json": "{}\n",
+             "envs/README.md": "notes\n"}
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    monkeypatch.setattr(run_identity, "_DV2S_ROOT", tmp_path)
+    before = run_identity.dv2s_sources_sha256()
+    for name in ("dv2s_gym/evalset/item.label.json", "policies/checkpoints/p/model_card.json", "envs/README.md"):
+        (tmp_path / name).write_text("edited\n")
+        assert run_identity.dv2s_sources_sha256() == before, name
+    for name in ("envs/code.py", "envs/scenic_highway/model.scenic", "scenario_bank/maps/town.xodr",
+                 "dv2s_gym/loop/untouched/a/meta.json"):
+        (tmp_path / name).write_text("edited\n")
+        now = run_identity.dv2s_sources_sha256()
+        assert now != before, name
+        before = now
