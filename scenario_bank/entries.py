@@ -247,11 +247,15 @@ class Listing:
 def scan_entries(root: Path, cached: Mapping[str, Any]) -> Listing:
     """Every entry of the bank folder ``root`` (none if it does not exist), reading a sidecar only when
     ``cached`` (an index written from an earlier :class:`Listing`) has no record of it with the same
-    modification time and size. :class:`~scenario_bank.errors.NotABankError` if ``root`` is not a bank."""
+    modification time and size. :class:`~scenario_bank.errors.NotABankError` if ``root`` is not a bank (a folder
+    of other things, or a file)."""
     entries: Dict[str, ScenarioEntry] = {}
     problems: Dict[str, str] = {}
     fresh: Dict[str, Any] = {}
     keys: Dict[str, str] = {}
+    if root.exists() and not root.is_dir():
+        raise NotABankError(f"{root} is not a scenario bank: it is a file, not a folder. Pass a bank folder, or a new "
+                            "or empty folder to start a bank there.")
     if root.is_dir():
         with os.scandir(root) as it:
             visible = [d for d in it if not d.name.startswith(".")]

@@ -191,6 +191,16 @@ def test_what_marks_a_bank(tmp_path, small_bank):
     (tmp_path / "other" / "sub").mkdir(parents=True)
     with pytest.raises(NotABankError, match="not a scenario bank"):
         Bank(tmp_path / "other")
+    (tmp_path / "afile.txt").write_text("x")
+    with pytest.raises(NotABankError, match="not a scenario bank: it is a file"):
+        Bank(tmp_path / "afile.txt")
+
+
+@pytest.mark.parametrize("command", [["bank", "list"], ["bank", "stats"], ["run", "highway_lead_vehicle_brakes"]])
+def test_a_bank_that_is_a_file_is_refused_by_every_command_alike(capsys, tmp_path, command):
+    (tmp_path / "afile.txt").write_text("x")
+    code, _, err = run(capsys, *command, "--bank", tmp_path / "afile.txt")
+    assert code == 2 and "is not a scenario bank: it is a file" in one_line_error(err)
 
 
 def test_a_bank_that_does_not_exist_is_refused_for_reading(capsys, tmp_path):
