@@ -69,6 +69,21 @@ def _show(value: Any, limit: int = 80) -> str:
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
+def _difference(recorded: Any, asked: Any) -> str:
+    """How an asked setting differs from the recorded one: two lists by what one has and the other lacks (their
+    shortened texts may read the same), anything else by both values."""
+    if isinstance(recorded, (list, tuple)) and isinstance(asked, (list, tuple)):
+        old = [json.dumps(v, sort_keys=True, default=str) for v in recorded]
+        new = [json.dumps(v, sort_keys=True, default=str) for v in asked]
+        added = [json.loads(v) for v in new if v not in old]
+        removed = [json.loads(v) for v in old if v not in new]
+        if added or removed:
+            parts = ([f"asked adds {_show(added)}"] if added else []) + ([f"leaves out {_show(removed)}"] if removed else [])
+            return f"the run has {len(recorded)}, {' and '.join(parts)}"
+        return f"the same {len(recorded)} in another order (run has {_show(recorded)}, asked {_show(asked)})"
+    return f"run has {_show(recorded)}, asked {_show(asked)}"
+
+
 def check_identity(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str], *, run: str,
                    fix: str, notes: Optional[Mapping[str, str]] = None,
                    error: Type[RunIdentityError] = RunIdentityError) -> None:
@@ -85,8 +100,7 @@ def check_identity(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: 
     if not keys_differing:
         return
     differences = [(key, recorded.get(key), asked.get(key)) for key in keys_differing]
-    shown = [f"{key}: run has {_show(old)}, asked {_show(new)}{(notes or {}).get(key, '')}"
-             for key, old, new in differences[:_SHOWN]]
+    shown = [f"{key}: {_difference(old, new)}{(notes or {}).get(key, '')}" for key, old, new in differences[:_SHOWN]]
     if len(differences) > _SHOWN:
         shown.append(f"and {len(differences) - _SHOWN} more")
     raise error(f"{run} with other settings ({'; '.join(shown)}); {fix}", differences)

@@ -29,3 +29,24 @@ def test_the_same_settings_go_on_to_build_the_space(run_folder):
     with pytest.raises(SpaceBuilt):  # the early check passes what the full one would
         mine("rule", MineSettings(budget=2, scenarios=SCENARIOS, seed=0), out=run_folder, progress=False,
              reports=False)
+
+
+@pytest.mark.slow
+def test_a_tag_selection_resumes_over_the_scenarios_it_chose_though_the_bank_grew(tmp_path):
+    """A run over ``tag:...`` mines the scenarios the tag chose when it began: an entry the bank gained since with
+    that tag (a mined bank grows under its own runs) does not make the same command a run with other settings."""
+    import shutil
+
+    from scenario_bank.bank import BANK_DIR
+
+    bank = tmp_path / "bank"
+    bank.mkdir()
+    shutil.copytree(BANK_DIR / "highway_lead_vehicle_stopped", bank / "highway_lead_vehicle_stopped")
+    settings = MineSettings(budget=1, scenarios=("tag:lead_vehicle_stopped",), bank_dir=str(bank), convert=False)
+    mine("rule", settings, out=tmp_path / "run", progress=False, reports=False)
+    shutil.copytree(BANK_DIR / "urban_lead_vehicle_stopped", bank / "urban_lead_vehicle_stopped")
+    run = mine("rule", settings.replace(budget=2), out=tmp_path / "run", progress=False, reports=False)
+    assert [r.scenario for r in run.records] == ["highway_lead_vehicle_stopped"] * 2
+    with pytest.raises(RunIdentityError, match=r"scenarios: the run has 1, asked adds \['urban_lead_vehicle_stopped'\]"):
+        mine("rule", settings.replace(budget=3, scenarios=("tag:lead_vehicle_stopped", "urban_lead_vehicle_stopped")),
+             out=tmp_path / "run", progress=False, reports=False)

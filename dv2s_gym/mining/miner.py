@@ -274,10 +274,21 @@ def _recorded(policy: str, settings: MineSettings, scenarios: Sequence[str],
     (:func:`~policies.run_identity.code_identity`: dv2s's sources, plug-ins, detectors, replaced built-ins)."""
     reference = settings.reference
     return {**record_format(SETTINGS_SCHEMA, SETTINGS_VERSION), "policy": policy, **settings.recorded(),
-            "batch": int(settings.batch), "scenarios": list(scenarios), "space": space_description,
+            "batch": int(settings.batch), "scenarios": list(scenarios), SELECTION: _selection(settings),
+            "space": space_description,
             RESUME_FINGERPRINT: resume_fingerprint(policy),
             REFERENCE_FINGERPRINT: resume_fingerprint(reference) if reference else None,
             BANK_IDENTITY: bank_identity(Bank(settings.bank_dir), scenarios), CODE_IDENTITY: code_identity()}
+
+
+SELECTION = "selection"
+"""The ``settings.json`` key of the scenario selection as asked (``["tag:mined"]``; ``None`` for the whole bank):
+a resume asking the same selection mines the scenarios it resolved to when the run began, though the bank has
+grown since (by this run's own conversions, say)."""
+
+
+def _selection(settings: MineSettings) -> Optional[List[str]]:
+    return list(settings.scenarios) if settings.scenarios is not None else None
 
 
 @dataclass(frozen=True)
@@ -647,10 +658,14 @@ def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[R
             check_policy_unchanged(saved.values, settings.reference, folder=out, run="mining run", error=MiningError,
                                    key=REFERENCE_FINGERPRINT, role="reference driver")
         check_code_unchanged(saved.values, run=f"{out} holds a mining run", error=MiningError)
-    names = saved.scenarios if saved and settings.scenarios is None else None
+    same_selection = saved is not None and (settings.scenarios is None
+                                            or _selection(settings) == saved.values.get(SELECTION))
+    names = saved.scenarios if same_selection else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
     space = space_module.SceneSpace(names or asked, settings.bank_dir)
     recorded = _recorded(policy, settings, space.scenarios, space.describe())
+    if saved is not None and settings.scenarios is None:
+        recorded[SELECTION] = saved.values.get(SELECTION)  # resumed without naming its scenarios: still the same run
     if saved is not None:
         _check_resume(saved.values, recorded, out)
         check_bank_unchanged(saved.values.get(BANK_IDENTITY), recorded[BANK_IDENTITY],
