@@ -80,6 +80,8 @@ from dv2s_gym.mining.cluster import cluster_failures, group
 from dv2s_gym.loop.errored import errored_episodes, merged_messages, messages_text
 from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.loop.heldout import episode_failed, failure_types, HeldOutStore, paired_summary
+from dv2s_gym.mining.conversion.record import read_conversions
+from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.loop.record import (
     ErroredEpisodes, FineTuneArm, HeldOutBefore, HeldOutComparison, HeldOutTests, LoopStart, MinedEntry, MiningSummary,
@@ -352,19 +354,18 @@ def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Min
     reproduction) from its ``conversions.jsonl`` (status ``kept`` with a bank entry), then (``replays``) the exact
     replays of its failing scenes (:func:`dv2s_gym.loop.replays.replay_entries`: ``replay`` true and ``parent``,
     from the conversions' ``replay_entry`` and from ``replays.jsonl``)."""
-    records = read_rows(Path(mine_out) / "conversions.jsonl")  # none when no cluster was converted
+    records = read_conversions(Path(mine_out) / "conversions.jsonl")  # none when no cluster was converted
     entries: Dict[str, MinedEntry] = {}
     for record in records:
-        if record.get("status") == "kept" and record.get("bank_entry"):
-            entries[str(record["cluster"])] = MinedEntry(
-                cluster=str(record["cluster"]), scenario=record["bank_entry"],
-                reproduction=(record.get("reproduction") or {}).get("rate"))
+        if record.kept and record.bank_entry:
+            entries[str(record.cluster)] = MinedEntry(cluster=str(record.cluster), scenario=record.bank_entry,
+                                                      reproduction=(record.reproduction or {}).get("rate"))
     kept = {entry.scenario for entry in entries.values()}
     for record in records:  # a cluster merged into a scenario kept in this run is tied to it
-        if record.get("status") == "merged" and record.get("merged_into") in kept:
-            entries.setdefault(str(record["cluster"]), MinedEntry(
-                cluster=str(record["cluster"]), scenario=record["merged_into"],
-                reproduction=(record.get("reproduction") or {}).get("rate")))
+        if record.merged and record.merged_into in kept:
+            entries.setdefault(str(record.cluster), MinedEntry(
+                cluster=str(record.cluster), scenario=record.merged_into,
+                reproduction=(record.reproduction or {}).get("rate")))
     converted = [entries[key] for key in sorted(entries)]
     if not replays:
         return converted
@@ -382,24 +383,30 @@ def _mining_summary(mine_out: Path) -> MiningSummary:
         if record.get("failure"):
             failures += 1
             counted += record.get("avoidable") is not False  # as MineRun.avoidable
+    episode_records: Optional[List[EpisodeRecord]] = None
     clusters = None
     try:
-        clusters = len(set(cluster_failures([EpisodeRecord.from_dict(r) for r in records]).values()))
-    except Exception:  # the count is informative; the loop goes on without it
-        pass
+        episode_records = [EpisodeRecord.from_dict(r) for r in records]
+        clusters = len(set(cluster_failures(episode_records).values()))
+    except (RecordError, MiningError):  # a record the counts cannot read: they are informative, the loop goes on
+        episode_records = None
     statuses: Dict[str, int] = {}
     reasons: List[str] = []
-    for record in read_rows(mine_out / "conversions.jsonl"):
-        statuses[record.get("status", "?")] = statuses.get(record.get("status", "?"), 0) + 1
-        if record.get("status") == "rejected" and (record.get("rejections") or record.get("reason")):
-            reasons += [str(r) for r in record.get("rejections") or [record["reason"]]]  # every failed check
+    conversions = read_conversions(mine_out / "conversions.jsonl")
+    for record in conversions:
+        status = str(record.status) if record.status is not None else "?"
+        statuses[status] = statuses.get(status, 0) + 1
+        if record.rejected and (record.rejections or record.reason):
+            reasons += [str(r) for r in record.rejections or [record.reason]]  # every failed check
     converted = sum(statuses.values())
-    tried = {str(r.get("cluster")) for r in read_rows(mine_out / "conversions.jsonl")}
+    tried = {str(record.cluster) for record in conversions}
+    # clusters no conversion tried whose every failing scene the reference driver failed too: never replayed
     reference_failed = None
-    try:  # clusters no conversion tried whose every failing scene the reference driver failed too: never replayed
-        reference_failed = sum(1 for cluster, members in group([EpisodeRecord.from_dict(r) for r in records]).items()
-                               if cluster not in tried and not any(reference_passed(r) for r in members))
-    except Exception:  # informative, as the cluster count
+    try:
+        reference_failed = None if episode_records is None else sum(
+            1 for cluster, members in group(episode_records).items()
+            if cluster not in tried and not any(reference_passed(r) for r in members))
+    except (RecordError, MiningError):  # informative, as the cluster count
         pass
 
     replayed: Dict[str, int] = {}
