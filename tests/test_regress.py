@@ -122,13 +122,13 @@ def test_junit_xml_has_one_case_per_scenario_and_the_verdict_and_is_valid(noisy_
     cases = root.findall(".//testcase")
     assert [c.get("name") for c in cases] == PAIR + ["overall verdict"]
     for case in cases[:-1]:
-        verdict = report["scenarios"][case.get("name")]["comparison"]["verdict"]
+        verdict = report.to_dict()["scenarios"][case.get("name")]["comparison"]["verdict"]
         assert (case.find("failure") is not None) == (verdict == "FAIL")
         assert (case.find("skipped") is not None) == (verdict == "INCONCLUSIVE")
-    assert (cases[-1].find("failure") is not None) == (report["verdict"] == "FAIL")
+    assert (cases[-1].find("failure") is not None) == (report.to_dict()["verdict"] == "FAIL")
     suite = root.find("testsuite")
-    assert int(suite.get("failures")) == len(report["regressed"]) + (report["verdict"] == "FAIL")
-    assert float(suite.get("time")) > 0 and suite.get("hostname") == report["hostname"]
+    assert int(suite.get("failures")) == len(report.to_dict()["regressed"]) + (report.to_dict()["verdict"] == "FAIL")
+    assert float(suite.get("time")) > 0 and suite.get("hostname") == report.to_dict()["hostname"]
 
 
 def _junit_of(tables, errors=0, baseline=True):
@@ -170,7 +170,7 @@ def test_junit_a_pooled_only_fail_is_a_failure_of_the_overall_case():
     spread = {f"s{i}": [(True, False)] * 7 + [(False, True)] * 3 + [(True, True)] * 3 + [(False, False)] * 187
               for i in range(5)}
     report, cases, suite = _junit_of(spread)
-    assert report["verdict"] == "FAIL" and report["regressed"] == []
+    assert report.to_dict()["verdict"] == "FAIL" and report.to_dict()["regressed"] == []
     assert cases["overall verdict"].find("failure") is not None
     assert "all scenarios pooled" in cases["overall verdict"].find("failure").get("message")
     assert suite.get("failures") == "1" and all(cases[f"s{i}"].find("skipped") is not None for i in range(5))
@@ -179,28 +179,28 @@ def test_junit_a_pooled_only_fail_is_a_failure_of_the_overall_case():
 def test_junit_error_is_an_error_and_inconclusive_is_skipped_with_its_reason():
     few = {"a": [(False, False)] * 3}
     report, cases, suite = _junit_of(few)
-    assert report["verdict"] == "INCONCLUSIVE"
+    assert report.to_dict()["verdict"] == "INCONCLUSIVE"
     assert cases["overall verdict"].find("skipped").get("message").startswith("INCONCLUSIVE: no scenario fails")
     report, cases, suite = _junit_of(few, errors=1)
-    assert report["verdict"] == "ERROR" and suite.get("errors") == "2"
+    assert report.to_dict()["verdict"] == "ERROR" and suite.get("errors") == "2"
     assert "RuntimeError: boom" in cases["overall verdict"].find("error").text
     assert cases["a"].find("error") is not None and cases["a"].find("skipped") is None
     report, cases, suite = _junit_of(few, errors=1, baseline=False)  # measures only
-    assert report["verdict"] == "ERROR" and cases["overall verdict"].find("error") is not None
+    assert report.to_dict()["verdict"] == "ERROR" and cases["overall verdict"].find("error") is not None
 
 
 def test_markdown_has_the_comparison_table(noisy_run):
     out, report = noisy_run
     text = (out / "report.md").read_text()
-    assert text.startswith(f"## dv2s regress: {report['verdict']}")
+    assert text.startswith(f"## dv2s regress: {report.to_dict()['verdict']}")
     assert "| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |" \
         in text
     for name in PAIR:
         row = next(line for line in text.splitlines() if line.startswith(f"| `{name}` | 4 |"))
-        assert row.endswith(f"| {report['scenarios'][name]['comparison']['verdict']} |")
+        assert row.endswith(f"| {report.to_dict()['scenarios'][name]['comparison']['verdict']} |")
     # a pull-request comment: the verdict first, the tables folded, no absolute path of this machine
     head = text.split("<details>")[0]
-    assert head.splitlines()[2].startswith(f"**{report['verdict']}**") and len(head) < 1500
+    assert head.splitlines()[2].startswith(f"**{report.to_dict()['verdict']}**") and len(head) < 1500
     assert "<summary>Scenarios, worst first</summary>" in text and text.count("<details>") == text.count("</details>")
     assert str(out) not in text and "dv2s replay report.json --episode" in text
 
@@ -230,12 +230,12 @@ def test_markdown_puts_the_regressed_scenarios_first_and_fits_a_comment(tmp_path
 
 def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):
     out, report = noisy_run
-    failed = report["newly_failing"][0]
+    failed = report.to_dict()["newly_failing"][0]
     video = tmp_path / "failed.webm"
     result = replay_episode(out / "report.json", failed, video=video)
     assert result["source"] == "trace" and result["matches"] and video.stat().st_size > 0
     assert replay_episode(out / "report.json", failed, from_policy=True)["matches"]  # the noisy policy too
-    passed = next(e["id"] for e in report["episodes"] if not e["baseline"]["failed"])
+    passed = next(e["id"] for e in report.to_dict()["episodes"] if not e["baseline"]["failed"])
     again = replay_episode(out / "report.json", passed, role="baseline")
     assert again["source"] == "policy" and again["matches"]
     with pytest.raises(RegressError, match="no episode 'nowhere/1'"):
