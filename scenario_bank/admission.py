@@ -5,9 +5,10 @@ compile, sample and short run in the sandbox (:mod:`scenario_bank.sandbox`); a r
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Optional, Tuple
+from typing import Any, Dict, Optional, Tuple, Union
 
 from scenario_bank.errors import BankOptionError, ScenarioRejectedError
+from scenario_bank.records import Provenance
 from scenario_bank.safety import UnsafeScenarioError
 from scenario_bank.sandbox import SandboxError, verify_script
 from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
@@ -50,19 +51,20 @@ def verify(script: str, label: str) -> None:
         raise ScenarioRejectedError(f"not added: {error}", error.stage, limit=error.limit) from None
 
 
-def upgrade_if_asked(script: str, provenance: Optional[Mapping[str, Any]],
-                     upgrade: bool) -> Tuple[str, Optional[Mapping[str, Any]]]:
-    """``script`` upgraded from Scenic 2 when ``upgrade`` is asked, its rewrites and notes added to ``provenance``."""
+def upgrade_if_asked(script: str, provenance: Optional[Provenance],
+                     upgrade: bool) -> Tuple[str, Union[None, Provenance, Dict[str, Any]]]:
+    """``script`` upgraded from Scenic 2 when ``upgrade`` is asked, its rewrites and notes added to ``provenance``
+    (its JSON object comes back with them; ``provenance`` itself when nothing was upgraded)."""
     if not upgrade or not isinstance(script, str):
         return script, provenance
 
     result = upgrade_scenic2(script)
     if not result.changed:
         return script, provenance
-    provenance = dict(provenance or {})
-    provenance["scenic2_rewrites"] = [str(r) for r in result.rewrites]
-    provenance["scenic2_notes"] = list(result.notes)
-    return result.source, provenance
+    upgraded = provenance.to_dict() if provenance is not None else {}
+    upgraded["scenic2_rewrites"] = [str(r) for r in result.rewrites]
+    upgraded["scenic2_notes"] = list(result.notes)
+    return result.source, upgraded
 
 
 def verify_or_name_scenic2(script: str, label: str, upgraded: bool) -> None:

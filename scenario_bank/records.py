@@ -16,9 +16,11 @@ Each is a frozen dataclass (a :class:`JsonRecord`) with :meth:`from_dict` (check
 :class:`RecordError` names the bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the
 JSON object the files hold: the fields a record does not know travel in ``extra``, and a field that is ``None`` is
 written as ``null`` only when the file format always writes it (or the object read had it as ``null``:
-``null_fields``), so reading a file and writing it back changes no byte. A record is also a read-only mapping over
-that JSON object (``record["seed"]``, ``record.get("failure")``), so code that reads the dict form reads the record
-alike.
+``null_fields``), so reading a file and writing it back changes no byte. A record is read by its attributes
+(``record.seed``, ``record.failure``); it is no mapping: its JSON object is :meth:`JsonRecord.to_dict`. Two records
+are equal when they are of one type and their JSON objects are equal; a record is never equal to a dict (compare
+its :meth:`JsonRecord.to_dict`) and is always true (whether a record read from ``{}`` holds anything is
+:func:`recorded`).
 """
 
 from __future__ import annotations
@@ -27,18 +29,17 @@ import dataclasses
 import math
 import re
 import unicodedata
-from collections.abc import Mapping as _MappingABC
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Dict, FrozenSet, Iterator, Mapping, Optional, Tuple
+from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple, Union
 
 from scenario_bank.elements import ElementError, normalize_elements
 from scenario_bank.errors import BankVersionError, DV2SError
 from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_relative_path
 from scenario_bank.story import StoryError, normalize_story
 
-__all__ = ["RecordError", "JsonRecord", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode", "HeldOutEpisode",
-           "SOURCE_KINDS", "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES", "SIDECAR_VERSION", "SCRIPT",
-           "SIDECAR", "CONTROL_FIX", "control_character_field", "is_entry_file"]
+__all__ = ["RecordError", "JsonRecord", "recorded", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode",
+           "HeldOutEpisode", "SOURCE_KINDS", "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES",
+           "SIDECAR_VERSION", "SCRIPT", "SIDECAR", "CONTROL_FIX", "control_character_field", "is_entry_file"]
 
 SCRIPT = "scenario.scenic"
 """A bank entry's script, in its folder."""
@@ -117,15 +118,25 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+def _json_object(value: Any) -> Any:
+    """``value``, a record as its JSON object (what a record's JSON object field holds)."""
+    return value.to_dict() if isinstance(value, JsonRecord) else value
+
+
+def _is_object(value: Any) -> bool:
+    """Whether ``value`` is a JSON object, or a record (whose JSON object is one)."""
+    return isinstance(value, (Mapping, JsonRecord))
+
+
 _CHECKS = {
     "str": (lambda v: isinstance(v, str), "a string"),
     "int": (_is_int, "an integer"),
     "number": (_is_number, "a number"),
     "bool": (lambda v: isinstance(v, bool), "true or false"),
-    "object": (lambda v: isinstance(v, Mapping), "a JSON object"),
+    "object": (_is_object, "a JSON object"),
     "list": (lambda v: isinstance(v, (list, tuple)), "a list"),
     "strings": (lambda v: isinstance(v, (list, tuple)) and all(isinstance(s, str) for s in v), "a list of strings"),
-    "objects": (lambda v: isinstance(v, (list, tuple)) and all(isinstance(s, Mapping) for s in v),
+    "objects": (lambda v: isinstance(v, (list, tuple)) and all(_is_object(s) for s in v),
                 "a list of JSON objects"),
     "any": (lambda v: True, "anything"),
 }
@@ -140,10 +151,11 @@ def _items_json(value: Any) -> Any:
     return [plain(item) for item in value]
 
 
-class JsonRecord(_MappingABC):
+class JsonRecord:
     """What the records share (those of this module, and the other typed records of files the product writes,
-    such as a loop's rounds): the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and
-    read-only mapping access to it. Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
+    such as a loop's rounds): the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and equality
+    by it (records of one type with equal JSON objects are equal; a record is not a mapping and never equals a
+    dict). Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
     from it is the record's ``extra`` or ``null_fields``), the fields :meth:`from_dict` needs in ``_REQUIRED``,
     the fields nested records fill in ``_NESTED``, the lists or objects of records of one type in ``_ITEMS``
     and, in ``_ATTRIBUTES``, a JSON key held by an attribute of another name (a key that is also one of the
@@ -168,11 +180,13 @@ class JsonRecord(_MappingABC):
         return all(data.get(key) is not None for key in cls._REQUIRED)
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]):
-        """The record of ``data`` (a JSON object as the files hold it), every known field checked;
-        :class:`RecordError` names a field of the wrong kind or a required one that is missing."""
+    def from_dict(cls, data: Union["JsonRecord", Mapping[str, Any]]):
+        """The record of ``data`` (a JSON object as the files hold it, or a record: one of this type as it is,
+        another read from its JSON object), every known field checked; :class:`RecordError` names a field of the
+        wrong kind or a required one that is missing."""
         if isinstance(data, cls):
             return data
+        data = _json_object(data)
         if not isinstance(data, Mapping):
             raise RecordError(f"a {cls._WHAT} must be a JSON object, not {type(data).__name__}")
         for key in cls._REQUIRED:
@@ -270,25 +284,22 @@ class JsonRecord(_MappingABC):
         out.update(self.extra)
         return out
 
-    def _json(self) -> Dict[str, Any]:
-        cached = self.__dict__.get("_cached_json")
-        if cached is None:
-            cached = self.to_dict()
-            object.__setattr__(self, "_cached_json", cached)
-        return cached
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return self.to_dict() == other.to_dict()
 
-    def __getitem__(self, key: str) -> Any:
-        return self._json()[key]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._json())
-
-    def __len__(self) -> int:
-        return len(self._json())
+    __hash__ = None  # type: ignore[assignment]  # equal by a JSON object that may hold dicts
 
     def replace(self, **changes: Any):
         """A copy with ``changes`` (field names) applied; the record is frozen."""
         return dataclasses.replace(self, **changes)
+
+
+def recorded(record: Optional[JsonRecord]) -> bool:
+    """Whether ``record`` (a record or a part of one) holds anything: ``None`` and a record whose JSON object is
+    empty (read from ``{}``, such as a loop step recorded as ``{}``) hold nothing. A record itself is always true."""
+    return record is not None and bool(record.to_dict())
 
 
 def _shown(value: Any) -> str:
@@ -423,7 +434,7 @@ class Sidecar(JsonRecord):
         return frozenset(self._KINDS) - {"story"}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "Sidecar":
+    def from_dict(cls, data: Union["JsonRecord", Mapping[str, Any]]) -> "Sidecar":
         """The sidecar of ``data``, its format checked (the one place it is): a JSON object with no control
         character in its text, of a ``schema_version`` this dv2s-gym reads (:class:`BankVersionError`
         otherwise), a non-empty ``description`` and ``map``, valid elements and story, a provenance of a known
@@ -431,6 +442,7 @@ class Sidecar(JsonRecord):
         is wrong."""
         if isinstance(data, cls):
             return data
+        data = _json_object(data)
         if not isinstance(data, Mapping):
             raise RecordError(f"a sidecar must be a JSON object, not {type(data).__name__}")
         field_name = control_character_field(dict(data))
@@ -456,7 +468,7 @@ class Sidecar(JsonRecord):
                 normalize_story(data["story"], "sidecar story")
             except StoryError as error:
                 raise RecordError(str(error)) from None
-        source = data.get("source") or {}
+        source = _json_object(data.get("source")) or {}
         if source.get("kind") not in SOURCE_KINDS:
             raise RecordError(f"sidecar source.kind must be one of {SOURCE_KINDS}, got {source.get('kind')!r}")
         if "name" in data and not is_entry_name(data["name"]):

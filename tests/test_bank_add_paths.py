@@ -43,7 +43,7 @@ def test_the_sidecar_record_is_the_one_check_of_the_format(tmp_path):
     folder.mkdir()
     (folder / "scenario.scenic").write_text("ego = new Car\n")
     meta = json.loads((SHIPPED / "highway_lead_vehicle_brakes" / "meta.json").read_text())
-    assert validate_sidecar(dict(meta), folder)["elements"] == meta["elements"]
+    assert validate_sidecar(dict(meta), folder).to_dict()["elements"] == meta["elements"]
     for bad, said in [({**meta, "source": {"kind": "mined", "seed": "x"}}, "sidecar field 'source.seed' must be an integer"),
                       ({**meta, "description": ""}, "'description' is missing or not a non-empty string"),
                       ({**meta, "source": {"kind": "mined", "files": ["../x"]}}, "not a file inside the entry folder"),

@@ -56,8 +56,8 @@ def test_the_loop_split_keeps_a_twin_with_its_held_out_family(tmp_path):
     entries = _with_parents(kept, str(bank.root))
     for seed in range(6):
         split = split_by_family(entries, 0.5, seed=seed)
-        sides = {e["parent"]: e["scenario"] in split.held_out for e in entries}
-        twin_sides = {e["scenario"] in split.held_out for e in entries if family_of(e) == families[twins[0]]}
+        sides = {e.to_dict()["parent"]: e.to_dict()["scenario"] in split.held_out for e in entries}
+        twin_sides = {e.to_dict()["scenario"] in split.held_out for e in entries if family_of(e) == families[twins[0]]}
         assert len(twin_sides) == 1, (seed, sides)
 
 

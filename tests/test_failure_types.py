@@ -138,7 +138,7 @@ def test_a_failure_type_registered_in_one_place_is_detected_scored_and_counted(t
     episodes.write_text(episodes.read_text(encoding="utf-8").replace('"type": "stall"', f'"type": "{TOY}"'),
                         encoding="utf-8")
     report = mining_report.build_report(run)
-    counts = report["counts"]["failures_by_type"]
+    counts = report.to_dict()["counts"]["failures_by_type"]
     assert counts == {"collision": 5, "off_road": 3, "low_ttc": 1, TOY: 1}
     assert list(counts) == [row.name for row in failure_table() if row.name in counts]
     # shown by its row's label, counted from the table like every type (no type is named by the report itself)
@@ -205,7 +205,7 @@ def test_regress_counts_a_registered_failure_type(toy_type, monkeypatch):
     not_chosen = _regress_task(monkeypatch, [10.0, 10.0, 4.0, 4.0], ["collision"])
     assert not_chosen["hard_braked"] is True and not not_chosen["failed"]  # recorded, counted only when chosen
     summary = regress_report.summarize([RegressEpisode.from_dict(r) for r in (braked, gentle, gentle, gentle)])
-    assert summary["hard_brake_rate"]["count"] == 1 and summary["failure_rate"]["count"] == 1
+    assert summary.to_dict()["hard_brake_rate"]["count"] == 1 and summary.to_dict()["failure_rate"]["count"] == 1
     assert [key for key, _ in regress_report.rates()][:4] == [
         "collision_rate", "off_road_rate", "stall_rate", "hard_brake_rate"]
 

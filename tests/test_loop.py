@@ -102,11 +102,11 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
     start, tuned = records([True] * 36 + [False] * 4), records([True] * 8 + [False] * 32)
     two = {"s0": "fam_x", "s1": "fam_x", "s2": "fam_x", "s3": "fam_y"}
     few = heldout_comparison(held(start), held(tuned), None, min_episodes=20, families=two, min_families=3)
-    assert few["pairs"] == 40 and few["heldout_families"] == 2 and few["heldout_scenarios"] == 4
-    assert "only 2 held-out families" in few["underpowered"] and "fewer than the 3 needed" in few["underpowered"]
-    assert few["relative_drop"] is None and few["mcnemar_p"] is None and few["after"]["k"] == 8
+    assert few.to_dict()["pairs"] == 40 and few.to_dict()["heldout_families"] == 2 and few.to_dict()["heldout_scenarios"] == 4
+    assert "only 2 held-out families" in few.to_dict()["underpowered"] and "fewer than the 3 needed" in few.to_dict()["underpowered"]
+    assert few.to_dict()["relative_drop"] is None and few.to_dict()["mcnemar_p"] is None and few.to_dict()["after"]["k"] == 8
     three = heldout_comparison(held(start), held(tuned), None, min_episodes=20, families={**two, "s2": "fam_z"}, min_families=3)
-    assert "underpowered" not in three and three["heldout_families"] == 3 and three["mcnemar_p"] < 0.01
+    assert "underpowered" not in three.to_dict() and three.to_dict()["heldout_families"] == 3 and three.to_dict()["mcnemar_p"] < 0.01
     from dv2s_gym.loop.report import _heldout_lines, _round_row
 
     assert "40 pairs from 2 families (4 scenarios)" in _heldout_lines(few)[1]
@@ -150,12 +150,12 @@ def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_
     add("replay_b", "fam_b", True, True)
     add("replay_c", "fam_c", True, True)
     summary = heldout_comparison(held(start), held(tuned), None, min_episodes=20, families=families, min_families=3)
-    assert summary["relative_drop"] == pytest.approx(20 / 28)
+    assert summary.to_dict()["relative_drop"] == pytest.approx(20 / 28)
     # drawing three families with replacement can leave out family A (drop 0) or take only it (drop 1): resampling
     # the 7 scenarios as if independent gave [0.43, 1.0]
-    assert summary["relative_drop_interval"] == [0.0, 1.0]
-    assert summary["relative_drop_interval_unit"] == "family" and summary["relative_drop_interval_units"] == 3
-    assert summary["mcnemar_unit"] == "pair" and summary["pairs_per_family"] == {"fam_a": 20, "fam_b": 4, "fam_c": 4}
+    assert summary.to_dict()["relative_drop_interval"] == [0.0, 1.0]
+    assert summary.to_dict()["relative_drop_interval_unit"] == "family" and summary.to_dict()["relative_drop_interval_units"] == 3
+    assert summary.to_dict()["mcnemar_unit"] == "pair" and summary.to_dict()["pairs_per_family"] == {"fam_a": 20, "fam_b": 4, "fam_c": 4}
     text = "\n".join(_heldout_lines(summary))
     assert "resamples whole held-out families (the unit the split holds out), 3 of them" in text
     assert "pairs within one family" in text and "are not independent" in text and "up to 20 pairs" in text
@@ -171,20 +171,20 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     tuned = records([True] * 6 + [False] * 14)
     control = records([True] * 16 + [False] * 4)
     full = heldout_comparison(held(start), held(tuned), held(control), min_episodes=20)
-    assert "underpowered" not in full
-    assert full["after"]["k"] == 6 and full["control"]["k"] == 16 and full["before"]["k"] == 18
-    assert full["relative_drop"] == pytest.approx(1 - 6 / 18) and full["mcnemar_p"] < 0.01
-    assert full["vs_control"]["table"] == {"both_fail": 6, "fine_tuned_only": 0, "control_only": 10, "neither": 4}
-    assert full["vs_control"]["mcnemar_p"] == pytest.approx(2 * 0.5 ** 10)
+    assert "underpowered" not in full.to_dict()
+    assert full.to_dict()["after"]["k"] == 6 and full.to_dict()["control"]["k"] == 16 and full.to_dict()["before"]["k"] == 18
+    assert full.to_dict()["relative_drop"] == pytest.approx(1 - 6 / 18) and full.to_dict()["mcnemar_p"] < 0.01
+    assert full.to_dict()["vs_control"]["table"] == {"both_fail": 6, "fine_tuned_only": 0, "control_only": 10, "neither": 4}
+    assert full.to_dict()["vs_control"]["mcnemar_p"] == pytest.approx(2 * 0.5 ** 10)
     short = heldout_comparison(held(start), held(tuned), held(control), min_episodes=21)
-    assert "fewer than the 21 needed" in short["underpowered"]
-    assert short["relative_drop"] is None and short["mcnemar_p"] is None
-    assert short["vs_control"]["mcnemar_p"] is None and short["vs_control"]["relative_drop"] is None
-    assert short["after"] == full["after"] and short["control"] == full["control"]  # the rates stay
-    assert "control" not in heldout_comparison(held(start), held(tuned), None, min_episodes=1)
+    assert "fewer than the 21 needed" in short.to_dict()["underpowered"]
+    assert short.to_dict()["relative_drop"] is None and short.to_dict()["mcnemar_p"] is None
+    assert short.to_dict()["vs_control"]["mcnemar_p"] is None and short.to_dict()["vs_control"]["relative_drop"] is None
+    assert short.to_dict()["after"] == full.to_dict()["after"] and short.to_dict()["control"] == full.to_dict()["control"]  # the rates stay
+    assert "control" not in heldout_comparison(held(start), held(tuned), None, min_episodes=1).to_dict()
     start[0]["failure"], start[1]["failure"] = {"type": "stall"}, {"type": "collision"}
     tuned[0]["failure"] = {"type": "stall"}
-    kinds = heldout_comparison(held(start), held(tuned), held(control), min_episodes=1)["failure_types"]
+    kinds = heldout_comparison(held(start), held(tuned), held(control), min_episodes=1).to_dict()["failure_types"]
     assert kinds == {"start": {"stall": 1, "collision": 1}, "fine_tuned": {"stall": 1}, "control": {}}
     from dv2s_gym.loop.report import render_markdown
 
@@ -214,9 +214,9 @@ def test_the_control_test_needs_the_minimums_and_the_floor_on_its_own_pairs():
             control.append({**key, "failed": False, "error": None} if seed == 10000 else
                            {**key, "failed": None, "error": "RuntimeError: worker hung"})
     summary = heldout_comparison(held(before), held(after), held(control), min_episodes=20, families=families, min_families=3)
-    assert summary["pairs"] == 20 and summary["vs_control"]["pairs"] == 4 and "underpowered" not in summary
-    assert summary["significantly_worse"]["control"] is None and summary["vs_control"]["mcnemar_p"] is None
-    assert "against the control: only 4 held-out episode(s)" in summary["vs_control"]["underpowered"]
+    assert summary.to_dict()["pairs"] == 20 and summary.to_dict()["vs_control"]["pairs"] == 4 and "underpowered" not in summary.to_dict()
+    assert summary.to_dict()["significantly_worse"]["control"] is None and summary.to_dict()["vs_control"]["mcnemar_p"] is None
+    assert "against the control: only 4 held-out episode(s)" in summary.to_dict()["vs_control"]["underpowered"]
     record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
                                                            "regress": {"verdict": "PASS", "reason": "stand-in"}}}
     judged = judge_round(record)
@@ -224,8 +224,8 @@ def test_the_control_test_needs_the_minimums_and_the_floor_on_its_own_pairs():
     assert "against the control did not run (against the control: only 4" in judged.reason
     # with minimums of zero the floor still holds for the control's pairs
     low = heldout_comparison(held(before), held(after), held(control), min_episodes=0, families=families, min_families=0)
-    assert low["significantly_worse"]["start"] is not None and low["significantly_worse"]["control"] is None
-    assert "fewer than 6" in low["vs_control"]["underpowered"]
+    assert low.to_dict()["significantly_worse"]["start"] is not None and low.to_dict()["significantly_worse"]["control"] is None
+    assert "fewer than 6" in low.to_dict()["vs_control"]["underpowered"]
 
 
 def test_fine_tune_weights_keep_the_bank_in_the_mix():
@@ -315,13 +315,13 @@ def test_paired_summary_counts_and_drop():
     before = records([True] * 8 + [False] * 2)
     after = records([True, False, False, False, True, False, False, False, True, False])
     summary = paired_summary(held(before), held(after))
-    assert summary["before"]["k"] == 8 and summary["after"]["k"] == 3
-    assert summary["relative_drop"] == pytest.approx(5 / 8)
-    assert summary["table"] == {"both_fail": 2, "after_only": 1, "before_only": 6, "neither": 1}
-    assert 0.0 < summary["mcnemar_p"] < 0.2
-    assert summary["before"]["low"] < 0.8 < summary["before"]["high"]
+    assert summary.to_dict()["before"]["k"] == 8 and summary.to_dict()["after"]["k"] == 3
+    assert summary.to_dict()["relative_drop"] == pytest.approx(5 / 8)
+    assert summary.to_dict()["table"] == {"both_fail": 2, "after_only": 1, "before_only": 6, "neither": 1}
+    assert 0.0 < summary.to_dict()["mcnemar_p"] < 0.2
+    assert summary.to_dict()["before"]["low"] < 0.8 < summary.to_dict()["before"]["high"]
     after[0]["error"] = "crashed"
-    assert paired_summary(held(before), held(after))["pairs"] == 9
+    assert paired_summary(held(before), held(after)).pairs == 9
 
 
 # --------------------------------------------------------------------------- the loop
@@ -524,7 +524,7 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     lines = []
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=6),
                       min_heldout_episodes=1, min_heldout_families=2, log=lines.append, **WIRING)
-    steps = report.rounds[0]["steps"]
+    steps = report.rounds[0].to_dict()["steps"]
     split = steps["split"]
     assert split["by"] == "family" and split["groups"] == 3 and len(split["held_out_families"]) == 2
     bank = Bank(tmp_path / "loop" / "bank")
@@ -552,7 +552,7 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     first, second = stand.regressions[:2]  # the untouched set: never the loop's bank
     assert first["bank_dir"] == second["bank_dir"] == str(__import__("dv2s_gym.loop.run", fromlist=["x"])
                                                            .UNTOUCHED_BANK)
-    assert second["candidate"] == report.rounds[0]["control_policy"] and second["baseline_role"] == "candidate"
+    assert second["candidate"] == report.rounds[0].to_dict()["control_policy"] and second["baseline_role"] == "candidate"
     assert any("[6/9] control" in line for line in lines)
     assert set(steps["regress"]["held_out_parents"]) == set(split["held_out_families"])
     markdown = report.paths["md"].read_text()
@@ -575,7 +575,7 @@ def test_held_out_episodes_the_reference_driver_does_not_pass_are_left_out_count
     lines = []
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=6),
                       min_heldout_episodes=1, min_heldout_families=1, log=lines.append, **WIRING)
-    steps = report.rounds[0]["steps"]
+    steps = report.rounds[0].to_dict()["steps"]
     evaluated = {role: episodes for role, _, episodes in stand.evaluations}
     everything = evaluated["reference"]  # the reference driver runs every held-out episode, first
     assert [role for role, _, _ in stand.evaluations][0] == "reference"
@@ -605,10 +605,10 @@ def test_reference_gate_counts_failures_and_errors_and_names_families_left_out_e
                     {"scenario": "b1", "seed": 1, "failed": True, "failure": {"type": "collision"}, "error": None},
                     {"scenario": "b2", "seed": 1, "failed": False, "failure": None, "error": None}])
     gate = loop_module.reference_gate(records, {"a1": "A", "b1": "B", "b2": "B"})
-    assert gate["excluded"] == [["a1", 1], ["a1", 2], ["b1", 1]] and gate["kept"] == 1
-    assert (gate["failed"], gate["errored"]) == (2, 1)
-    assert gate["excluded_families"] == ["A"]  # B keeps a passed episode
-    assert gate["by_scenario"]["a1"]["failures"] == {"stall": 1, "error": 1}
+    assert gate.to_dict()["excluded"] == [["a1", 1], ["a1", 2], ["b1", 1]] and gate.to_dict()["kept"] == 1
+    assert (gate.to_dict()["failed"], gate.to_dict()["errored"]) == (2, 1)
+    assert gate.to_dict()["excluded_families"] == ["A"]  # B keeps a passed episode
+    assert gate.to_dict()["by_scenario"]["a1"]["failures"] == {"stall": 1, "error": 1}
     from dv2s_gym.loop.report import reference_gate_text
 
     text = reference_gate_text(gate)
@@ -629,7 +629,7 @@ def test_no_member_of_a_held_out_family_reaches_either_arm(tmp_path, monkeypatch
     stand = _StandIns(monkeypatch)
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", min_heldout_episodes=1, log=lambda _: None,
                       miner=FakeMiner(WIRING["scenarios"], failures_per_round=6, replays=True), **WIRING)
-    split = report.rounds[0]["steps"]["split"]
+    split = report.rounds[0].to_dict()["steps"]["split"]
     bank = Bank(tmp_path / "loop" / "bank")
     family = {e.name for e in bank if e.source.parent in split["held_out_families"]}
     assert any(name.startswith("replay_") for name in family)
@@ -672,7 +672,7 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
     excluded = {"m_cutin_replay", "highway_cut_in_from_left"}
     record = loop_module._fine_tune_arm("dv2s-ppo", tmp_path / "arm", excluded, 0.5, arm, with_mined=True, label="x")
     assert set(captured) == {"urban_lead_vehicle_stopped", "m_lead"}
-    assert record["families"] == ["urban_lead_vehicle_stopped"]
+    assert record.to_dict()["families"] == ["urban_lead_vehicle_stopped"]
     # the same draw outside the loop (the fine-tuning sweep's): the fine-tuned arm's, and the control's without m_lead
     weights, facts = loop_module.arm_weights(str(bank), excluded, 0.5, with_mined=True)
     assert weights == captured and facts["mined_upweighted"] == 1
@@ -733,8 +733,8 @@ def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypat
     lines = []
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=6),
                       min_heldout_episodes=20, log=lines.append, **WIRING)
-    after = report.rounds[0]["steps"]["after"]
-    held = report.rounds[0]["steps"]["split"]["held_out"]
+    after = report.rounds[0].to_dict()["steps"]["after"]
+    held = report.rounds[0].to_dict()["steps"]["split"]["held_out"]
     assert after["pairs"] == len(held) * WIRING["k_eval"] < 20
     assert after["underpowered"] and after["relative_drop"] is None and after["mcnemar_p"] is None
     assert sum("WARNING" in line and "fewer than the 20 needed" in line for line in lines) == 1
@@ -759,7 +759,7 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
     lines = []
     report = run_loop("dv2s-ppo", out=out, miner=miner, log=lines.append, **WIRING)
     assert [call["out"][-len("control"):] for call in stand.fine_tunes] == ["control"]  # only the control ran
-    assert len(miner.calls) == 1 and "control" in report.rounds[0]["steps"]
+    assert len(miner.calls) == 1 and "control" in report.rounds[0].to_dict()["steps"]
     resumed = [line for line in lines if "resuming" in line]
     assert len(resumed) == 1 and "5 of" in resumed[0] and "mining failures" in resumed[0], lines
 
@@ -788,7 +788,7 @@ def test_a_round_that_keeps_nothing_is_skipped_and_says_why(tmp_path, monkeypatc
     lines = []
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=0),
                       log=lines.append, **WIRING)
-    steps = report.rounds[0]["steps"]
+    steps = report.rounds[0].to_dict()["steps"]
     assert steps["skipped"].startswith("no mined scenario was kept this round (0 conversion(s) tried")
     assert not stand.fine_tunes and not stand.evaluations and not stand.regressions
     assert any(steps["skipped"] in line for line in lines) and steps["skipped"] in report.paths["md"].read_text()
@@ -851,17 +851,17 @@ def test_mined_entries_include_the_exact_replays_with_their_parent(tmp_path):
     for name, rows in (("episodes", episodes), ("conversions", conversions), ("replays", replays)):
         (run_dir / f"{name}.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     entries = mined_entries(run_dir)
-    assert [e["scenario"] for e in entries] == ["mined_a", "replay_a", "replay_b", "replay_c"]
-    assert {e["scenario"]: e.get("parent") for e in entries if e.get("replay")} == {
+    assert [e.to_dict()["scenario"] for e in entries] == ["mined_a", "replay_a", "replay_b", "replay_c"]
+    assert {e.to_dict()["scenario"]: e.to_dict().get("parent") for e in entries if e.to_dict().get("replay")} == {
         "replay_a": "a", "replay_b": "b", "replay_c": "c"}
-    assert [e["scenario"] for e in mined_entries(run_dir, replays=False)] == ["mined_a"]
+    assert [e.to_dict()["scenario"] for e in mined_entries(run_dir, replays=False)] == ["mined_a"]
     # the family split keeps a converted entry and the replay of the same failure on one side
     split = split_by_family(entries, 0.5, seed=3)
     assert {"mined_a", "replay_a"} <= set(split.held_out) or {"mined_a", "replay_a"} <= set(split.fine_tune)
     assert split.groups == 3 and not set(split.held_out_families) & set(split.fine_tune_families)
     # a run that converted nothing (no conversions.jsonl) still yields its exact replays
     (run_dir / "conversions.jsonl").unlink()
-    assert [e["scenario"] for e in mined_entries(run_dir)] == ["replay_c"]
+    assert [e.to_dict()["scenario"] for e in mined_entries(run_dir)] == ["replay_c"]
 
 
 def test_a_round_whose_conversions_are_all_rejected_holds_out_replay_families(tmp_path, monkeypatch):
@@ -873,7 +873,7 @@ def test_a_round_whose_conversions_are_all_rejected_holds_out_replay_families(tm
     stand = _StandIns(monkeypatch)
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", min_heldout_episodes=1, log=lambda _: None,
                       miner=FakeMiner(WIRING["scenarios"], failures_per_round=6, replays_only=True), **WIRING)
-    steps = report.rounds[0]["steps"]
+    steps = report.rounds[0].to_dict()["steps"]
     assert "skipped" not in steps and steps["mine"]["conversions"] == {}
     split = steps["split"]
     assert split["groups"] == 3 and split["held_out"] and split["fine_tune"]
@@ -922,8 +922,8 @@ def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_pat
     # 6 seeds: the fewest held-out pairs a round is judged on (loop_verdict.EVIDENCE_FLOOR)
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=2, min_heldout_episodes=1, min_heldout_families=1,
                       miner=_GrowingMiner(WIRING["scenarios"]), log=lambda _: None, **{**WIRING, "k_eval": 6})
-    first, second = (r["steps"] for r in report.rounds)
-    assert report.rounds[1]["policy"] == report.rounds[0]["new_policy"]
+    first, second = (r.to_dict()["steps"] for r in report.rounds)
+    assert report.rounds[1].to_dict()["policy"] == report.rounds[0].to_dict()["new_policy"]
     assert len(first["split"]["held_out_families"]) == 1 and second["split"]["groups"] == 3
     trained = set(first["split"]["fine_tune_families"]) | set(first["fine_tune"]["families"])
     assert first["split"]["fine_tune_families"] and set(first["split"]["fine_tune_families"]) <= trained
@@ -940,8 +940,8 @@ def test_a_discarded_rounds_fine_tuning_does_not_keep_its_families_out_of_the_ne
     _regression_verdicts(monkeypatch, {"round_1": "FAIL", "round_2": "PASS"})
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=2, min_heldout_episodes=1, min_heldout_families=1,
                       miner=_GrowingMiner(WIRING["scenarios"]), log=lambda _: None, **WIRING)
-    first, second = (r["steps"] for r in report.rounds)
-    assert report.rounds[1]["policy"] == "dv2s-ppo"
+    first, second = (r.to_dict()["steps"] for r in report.rounds)
+    assert report.rounds[1].to_dict()["policy"] == "dv2s-ppo"
     trained = set(first["split"]["fine_tune_families"]) | set(first["fine_tune"]["families"])
     assert second["split"]["groups"] == 3 and len(second["split"]["held_out_families"]) == 2
     assert set(second["split"]["held_out_families"]) & trained
@@ -982,7 +982,7 @@ def test_the_held_out_split_groups_entries_by_the_family_they_were_clustered_by(
     add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_x", "c")
     add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_of_mined_x", "c", parent="mined_x")
     kept = [{"cluster": "a", "scenario": "mined_x"}, {"cluster": "b", "scenario": "mined_of_mined_x"}]
-    parents = {e["scenario"]: e["parent"] for e in _with_parents(kept, str(bank))}
+    parents = {e.to_dict()["scenario"]: e.to_dict()["parent"] for e in _with_parents(kept, str(bank))}
     assert parents == {name: scenario_family(name, str(bank)) for name in parents} == {
         "mined_x": "highway_cut_in_from_right", "mined_of_mined_x": "highway_cut_in_from_right"}
     assert split_by_family(_with_parents(kept, str(bank)), 0.5, seed=0).groups == 1
@@ -1064,26 +1064,26 @@ def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, 
     settings = {**WIRING, "untouched_seeds": 0, "min_heldout_episodes": 1, "min_heldout_families": 1}
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lines.append, **settings)
     first, second, third = report.rounds
-    assert [r["policy"] for r in report.rounds] == ["dv2s-ppo", "dv2s-ppo", second["new_policy"]]
-    assert [call["policy"] for call in miner.calls] == ["dv2s-ppo", "dv2s-ppo", second["new_policy"]]
+    assert [r.to_dict()["policy"] for r in report.rounds] == ["dv2s-ppo", "dv2s-ppo", second.to_dict()["new_policy"]]
+    assert [call["policy"] for call in miner.calls] == ["dv2s-ppo", "dv2s-ppo", second.to_dict()["new_policy"]]
     tuned_from = [call["policy"] for call in stand.fine_tunes]
-    assert tuned_from == ["dv2s-ppo"] * 4 + [second["new_policy"]] * 2  # both arms of each round
-    assert first["next_policy"] == "dv2s-ppo" and first["next_policy_reason"].startswith("REJECTED")
-    assert second["next_policy"] == second["new_policy"] and second["next_policy_reason"].startswith("ACCEPTED")
-    assert third["next_policy"] == second["new_policy"] and third["next_policy_reason"].startswith("NOT ACCEPTED")
-    assert f"round 1: round 2 starts from dv2s-ppo: {first['next_policy_reason']}" in lines
-    assert any(line.startswith(f"round 2: round 3 starts from {second['new_policy']}: ACCEPTED") for line in lines)
+    assert tuned_from == ["dv2s-ppo"] * 4 + [second.to_dict()["new_policy"]] * 2  # both arms of each round
+    assert first.to_dict()["next_policy"] == "dv2s-ppo" and first.to_dict()["next_policy_reason"].startswith("REJECTED")
+    assert second.to_dict()["next_policy"] == second.to_dict()["new_policy"] and second.to_dict()["next_policy_reason"].startswith("ACCEPTED")
+    assert third.to_dict()["next_policy"] == second.to_dict()["new_policy"] and third.to_dict()["next_policy_reason"].startswith("NOT ACCEPTED")
+    assert f"round 1: round 2 starts from dv2s-ppo: {first.to_dict()['next_policy_reason']}" in lines
+    assert any(line.startswith(f"round 2: round 3 starts from {second.to_dict()['new_policy']}: ACCEPTED") for line in lines)
     verdict = json.loads(report.paths["json"].read_text())["recommendation"]
-    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["policy"] == second["new_policy"]
-    assert f"Policy to use: `{second['new_policy']}`" in report.paths["md"].read_text()
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["policy"] == second.to_dict()["new_policy"]
+    assert f"Policy to use: `{second.to_dict()['new_policy']}`" in report.paths["md"].read_text()
     saved = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"]
-    in_folder = second["new_policy"].replace(str(tmp_path / "loop"), "<loop>")  # loop.json's path inside the folder
+    in_folder = second.to_dict()["new_policy"].replace(str(tmp_path / "loop"), "<loop>")  # loop.json's path inside the folder
     assert in_folder.startswith("ppo:<loop>/round_2/")
     assert [r["next_policy"] for r in saved] == ["dv2s-ppo", in_folder, in_folder]
 
     again = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lines.append, **settings)
     assert len(miner.calls) == 3 and len(stand.fine_tunes) == 6  # resumed: nothing re-run, the same starts
-    assert [r["next_policy"] for r in again.rounds] == [r["next_policy"] for r in report.rounds]
+    assert [r.to_dict()["next_policy"] for r in again.rounds] == [r.to_dict()["next_policy"] for r in report.rounds]
 
 
 @pytest.mark.parametrize("over_all_rounds, starts_from", [("FAIL", "start"), ("PASS", "fine-tuned")])
@@ -1112,13 +1112,13 @@ def test_the_next_round_follows_the_policy_to_use_when_the_rounds_are_judged_aga
     settings = {**WIRING, "untouched_seeds": 0, "min_heldout_episodes": 1, "min_heldout_families": 1}
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lambda _: None, **settings)
     first, second, third = report.rounds
-    assert second["policy"] == first["new_policy"] and judged  # round 1 alone: ACCEPTED, round 2 starts from it
-    expected = "dv2s-ppo" if starts_from == "start" else second["new_policy"]
-    assert second["next_policy"] == third["policy"] == expected
+    assert second.to_dict()["policy"] == first.to_dict()["new_policy"] and judged  # round 1 alone: ACCEPTED, round 2 starts from it
+    expected = "dv2s-ppo" if starts_from == "start" else second.to_dict()["new_policy"]
+    assert second.to_dict()["next_policy"] == third.to_dict()["policy"] == expected
     assert miner.calls[2]["policy"] == expected
     written = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"][1]
     assert written["next_policy"] == expected.replace(str(tmp_path / "loop"), "<loop>")  # inside the loop folder
-    assert second["next_policy_reason"].startswith("REJECTED" if over_all_rounds == "FAIL" else "ACCEPTED")
+    assert second.to_dict()["next_policy_reason"].startswith("REJECTED" if over_all_rounds == "FAIL" else "ACCEPTED")
 
 
 @pytest.mark.parametrize("change, named", [({"n_envs": 2}, "n_envs: run has 1, asked 2"),
@@ -1221,10 +1221,10 @@ def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected
                                                               "reason": "check: compile failed"}) + "\n")
     (tmp_path / "episodes.jsonl").write_text("")
     mined = _mining_summary(tmp_path)
-    assert mined["rejected_reasons"] == reasons + ["check: compile failed"] and mined["rejected_reason_count"] == 3
+    assert mined.to_dict()["rejected_reasons"] == reasons + ["check: compile failed"] and mined.to_dict()["rejected_reason_count"] == 3
     markdown = render_markdown(written_report({"settings": {"policy": "dv2s-ppo"}, "rounds": [
-        {"round": 1, "steps": {"mine": {**mined, "kept": [], "folder": str(tmp_path)}}}]}))
-    for reason in mined["rejected_reasons"]:
+        {"round": 1, "steps": {"mine": {**mined.to_dict(), "kept": [], "folder": str(tmp_path)}}}]}))
+    for reason in mined.to_dict()["rejected_reasons"]:
         assert f"  - rejected: {reason}" in markdown
 
 
@@ -1239,9 +1239,9 @@ def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_
     tuned = [{"scenario": s, "seed": seed, "failed": False, "error": "RuntimeError: NaN action" if s == "c1" else None}
              for s in families for seed in range(10)]
     summary = heldout_comparison(held(start), held(tuned), held(control), min_episodes=20, families=families, min_families=3)
-    assert summary["pairs"] == 20 and summary["heldout_families"] == 2 and summary["sampled_families"] == 3
-    assert "only 2 held-out families (parent scenarios) with a tested pair" in summary["underpowered"]
-    assert summary["significantly_worse"] == {"start": None, "control": None}
+    assert summary.to_dict()["pairs"] == 20 and summary.to_dict()["heldout_families"] == 2 and summary.to_dict()["sampled_families"] == 3
+    assert "only 2 held-out families (parent scenarios) with a tested pair" in summary.to_dict()["underpowered"]
+    assert summary.to_dict()["significantly_worse"] == {"start": None, "control": None}
     record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
                                                             "regress": {"verdict": "PASS", "reason": "r"}}}
     assert judge_round(record).verdict == "NOT ACCEPTED"
@@ -1276,13 +1276,13 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
     episodes = [("s1", 0), ("s1", 1), ("s2", 0), ("s2", 1)]
     settings = dict(bank_dir=None, workers=WorkerSettings(workers=1), progress=False)
     first = evaluate_heldout("before", "P0", episodes, store=HeldOutStore(path), **settings)
-    assert errored_episodes(first)["episodes"] == 1
+    assert errored_episodes(first).episodes == 1
     store = HeldOutStore(path)  # as the `after` step opens it
     before = evaluate_heldout("before", "P0", episodes, store=store, **settings)
     after = evaluate_heldout("after", "P1", episodes, store=store, **settings)
     assert runs.count(("before", "s1", 0)) == 1 and [r.to_dict() for r in before] == [r.to_dict() for r in first]
     summary = heldout_comparison(before, after, None, min_episodes=0, seed=0)
-    assert summary["pairs"] == 3 and summary["errors"] == 1
+    assert summary.to_dict()["pairs"] == 3 and summary.to_dict()["errors"] == 1
 
 
 def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_frequent_first():
@@ -1296,14 +1296,14 @@ def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_freq
     records = [{"scenario": "s1", "seed": i, "error": e} for i, e in enumerate(errors)]
     records.append({"scenario": "s2", "seed": 0, "error": None, "failed": True})
     found = errored_episodes(records)
-    assert found["episodes"] == 11 and found["scenarios"] == {"s1": 11}
-    assert found["messages"]["s1"] == [{"message": "worker hung", "count": 3},
+    assert found.to_dict()["episodes"] == 11 and found.to_dict()["scenarios"] == {"s1": 11}
+    assert found.to_dict()["messages"]["s1"] == [{"message": "worker hung", "count": 3},
                                        {"message": "worker crashed", "count": 2}, {"message": "c", "count": 2},
                                        {"message": "scene not sampled", "count": 1}, {"message": "a", "count": 1},
                                        {"message": "b", "count": 1}, {"message": "d", "count": 1}]
-    assert "unlisted" not in found
-    assert found["examples"] == {"s1": "scene not sampled"}
-    text = messages_text(found["messages"], "s1")
+    assert "unlisted" not in found.to_dict()
+    assert found.to_dict()["examples"] == {"s1": "scene not sampled"}
+    text = messages_text(found.to_dict()["messages"], "s1")
     assert text.startswith("worker hung (3 episodes); worker crashed (2 episodes); c (2 episodes)")
     assert text.endswith("and 2 more distinct message(s) in 2 episode(s)")
     # a later step's errors add up

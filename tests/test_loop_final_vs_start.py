@@ -54,12 +54,12 @@ def _loop(tmp_path: Path, rounds: int, hashes2=None) -> dict:
 
 def test_final_policy_is_paired_with_the_starting_policy(tmp_path):
     final = final_vs_start(_loop(tmp_path, 2), tmp_path / "loop")
-    assert final["start"] == "p0" and final["final"] == "p2" and final["rounds"] == [1, 2]
-    assert final["episodes"] == 8
-    assert final["new_failure_rate"]["value"] == 7 / 8 and final["old_failure_rate"]["value"] == 1 / 8
-    assert final["difference"]["value"] == 6 / 8
-    assert final["verdict"] == "FAIL"  # 6 discordant pairs all against P2: McNemar p = 1/64
-    paired = json.loads(Path(final["report"]).read_text())
+    assert final.to_dict()["start"] == "p0" and final.to_dict()["final"] == "p2" and final.to_dict()["rounds"] == [1, 2]
+    assert final.to_dict()["episodes"] == 8
+    assert final.to_dict()["new_failure_rate"]["value"] == 7 / 8 and final.to_dict()["old_failure_rate"]["value"] == 1 / 8
+    assert final.to_dict()["difference"]["value"] == 6 / 8
+    assert final.to_dict()["verdict"] == "FAIL"  # 6 discordant pairs all against P2: McNemar p = 1/64
+    paired = json.loads(Path(final.to_dict()["report"]).read_text())
     assert paired["baseline"]["spec"] == "p0" and paired["candidate"]["spec"] == "p2"
     assert sum(e["baseline"]["failed"] for e in paired["episodes"]) == 1
 
@@ -83,10 +83,10 @@ def test_the_report_shows_the_comparison_only_with_two_tested_rounds(tmp_path):
 def test_a_changed_starting_bank_is_not_compared(tmp_path):
     changed = {"scenario_a": "h-scenario_a", "scenario_b": "edited"}
     final = final_vs_start(_loop(tmp_path, 2, hashes2=changed))
-    assert "scenario_b" in final["error"] and "no paired comparison" in final["error"]
+    assert "scenario_b" in final.to_dict()["error"] and "no paired comparison" in final.to_dict()["error"]
     missing = _loop(tmp_path, 2)
     Path(missing["rounds"][0]["steps"]["regress"]["report"]).unlink()
-    assert final_vs_start(missing)["error"].startswith("cannot read the rounds' regression reports")
+    assert final_vs_start(missing).error.startswith("cannot read the rounds' regression reports")
 
 
 def _accepted(record: dict) -> dict:
@@ -156,13 +156,13 @@ def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_direct
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
     given = Path("../moved/loop")  # the moved loop folder, typed from another working directory
-    assert final_vs_start(body, folder=given)["verdict"] == "FAIL"
+    assert final_vs_start(body, folder=given).verdict == "FAIL"
     paths = write_loop_reports(body, given)
     assert json.loads(paths["json"].read_text())["recommendation"]["policy"] == "p0"
     assert loop_module._next_start(SimpleNamespace(state=_state(rounds), out=given), 2, "p1") == "p0"
     # a cross-round check that cannot run (here: no loop folder to read the reports from) never accepts
     unread = final_vs_start(body)
-    assert "cannot read" in unread["error"]
+    assert "cannot read" in unread.error
     verdict = recommendation({**body, "final_vs_start": unread})
     assert verdict.verdict == "NOT ACCEPTED" and verdict.exit_code == 3 and verdict.policy == "p1"
     assert "could not run" in verdict.reason
@@ -173,7 +173,7 @@ def test_the_loop_records_regression_report_paths_that_do_not_depend_on_the_work
 
     monkeypatch.chdir(tmp_path)
     summary = _regress_summary({"verdict": "PASS"}, Path("out/loop/round_1/regress/report.json"))
-    assert summary["report"] == str(tmp_path.resolve() / "out/loop/round_1/regress/report.json")
+    assert summary.report == str(tmp_path.resolve() / "out/loop/round_1/regress/report.json")
 
 
 def test_a_round_begun_from_another_policy_than_the_rounds_before_it_recommend_is_refused(tmp_path):
@@ -197,7 +197,7 @@ def test_a_rounds_cross_round_check_is_a_field_written_as_read_null_included(tmp
     assert "final_vs_start" in written[0] and written[0]["final_vs_start"] is None
     first, second = (RoundRecord.from_dict(record) for record in written)
     assert first.cross_round_checked and first.final_vs_start is None and "final_vs_start" not in first.extra
-    assert second.final_vs_start["verdict"] == "FAIL" and first.to_dict() == written[0]
+    assert second.final_vs_start.verdict == "FAIL" and first.to_dict() == written[0]
     unchecked = RoundRecord.from_dict({"round": 1})
     assert not unchecked.cross_round_checked and "final_vs_start" not in unchecked.to_dict()
     assert unchecked.with_cross_round_check(None).to_dict() == {**unchecked.to_dict(), "final_vs_start": None}

@@ -112,7 +112,7 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
     assert miner.calls[0]["env_config"] == SHIPPED_CONFIG
     assert evaluations and all(config == SHIPPED_CONFIG for _, config in evaluations)
     assert regressions == [SHIPPED_CONFIG]
-    steps = report.rounds[0]["steps"]
+    steps = report.rounds[0].to_dict()["steps"]
     assert steps["fine_tune"]["reward_weights"] == reward and steps["fine_tune"]["env_config"] == expected
     assert steps["after"]["relative_drop"] == 1.0
     state = json.loads((tmp_path / "loop" / "loop.json").read_text())

@@ -32,7 +32,7 @@ def test_a_failure_is_kept_as_its_exact_replay_without_a_video_or_a_script(recor
     bank = Bank(tmp_path / "bank")
     entry = bank.get(out["replay_entry"])
     assert {"mined", "replay", "collision"} <= set(entry.tags) and entry.source.parent == SCENARIO
-    assert entry.source["video"] is None and entry.source["trace"] == "trace.json.gz"
+    assert entry.source.video is None and entry.source.trace == "trace.json.gz"
     assert not entry.missing_files() and (entry.folder / "trace.json.gz").is_file()
     assert entry.source.interaction["failure_type"] == "collision" and entry.source.e2e_sc == 1.0
     assert replay_failure(bank, out["replay_entry"]).get("matches") is True  # the recorded episode, step for step
@@ -179,7 +179,7 @@ def test_exact_replays_take_the_families_in_turn_largest_cluster_first(tmp_path,
 
     def stand_in(record, run_dir, settings, *, bank, cluster):
         replayed.append(cluster)
-        return {"cluster": cluster, "index": record["index"], "scenario": record["scenario"], "status": "kept",
+        return {"cluster": cluster, "index": record.index, "scenario": record.scenario, "status": "kept",
                 "replay_entry": f"replay_{len(replayed)}", "reason": None}
 
     monkeypatch.setattr(convert, "replay_failure_entry", stand_in)
@@ -198,7 +198,7 @@ def test_exact_replays_take_the_families_in_turn_largest_cluster_first(tmp_path,
     typed = [EpisodeRecord.from_dict(r) for r in records]
     order = replay_order(group(typed))
     assert order == replay_order(dict(reversed(list(group(typed).items()))))
-    assert [r["index"] for _, r in order] == [4, 13, 14, 8, 11]
+    assert [r.index for _, r in order] == [4, 13, 14, 8, 11]
 
 
 def test_an_exact_replay_is_kept_only_of_a_scene_the_reference_driver_passed(tmp_path):
@@ -221,14 +221,14 @@ def test_an_exact_replay_is_kept_only_of_a_scene_the_reference_driver_passed(tmp
     unchecked = dict(_failed(3, "d", "car"), reference=None)
     records = [stalled, passed, near, unchecked]
     order = replay_order(group([EpisodeRecord.from_dict(r) for r in records]))
-    assert sorted(r["index"] for _, r in order) == [1, 2, 3]  # no replay of the scene the reference stalled in
+    assert sorted(r.index for _, r in order) == [1, 2, 3]  # no replay of the scene the reference stalled in
     from dv2s_gym.loop.run import _mining_summary
     from dv2s_gym.loop.replays import reference_passed
 
     assert not reference_passed(stalled)
     assert reference_passed(passed) and reference_passed(near) and reference_passed(unchecked)
     (tmp_path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
-    assert _mining_summary(tmp_path)["clusters_reference_failed"] == 1
+    assert _mining_summary(tmp_path).clusters_reference_failed == 1
 
 
 def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tmp_path, monkeypatch):

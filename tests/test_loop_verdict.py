@@ -121,7 +121,7 @@ def test_a_fine_tuned_policy_significantly_worse_than_the_start_on_the_held_out_
     episodes the starting policy passed (and passes none it failed): not accepted on non-inferiority alone."""
     verdict, summary = _judged(before=lambda f, s, seed: False, after=lambda f, s, seed: seed < 2 and f < 3,
                                control=lambda f, s, seed: True)
-    worse = summary["significantly_worse"]
+    worse = summary.to_dict()["significantly_worse"]
     assert worse["start"]["worse"] and not worse["control"]["worse"] and worse["start"]["families"] == 4
     assert verdict.verdict == "REJECTED" and verdict.policy == "dv2s-ppo"
     assert verdict.decided_by == "heldout_vs_start"
@@ -135,7 +135,7 @@ def test_a_harm_confined_to_one_held_out_family_is_not_averaged_away():
     control = lambda f, s, seed: f < 3  # noqa: E731
     after = lambda f, s, seed: f == 3  # noqa: E731
     verdict, summary = _judged(before=lambda f, s, seed: True, after=after, control=control)
-    test = summary["significantly_worse"]["control"]
+    test = summary.to_dict()["significantly_worse"]["control"]
     assert test["worse"] and test["worse_families"] == ["family_3"] and test["fine_tuned_only"] == 8
     assert verdict.verdict == "REJECTED" and verdict.decided_by == "heldout_vs_control"
     assert "family_3" in verdict.reason and "the control" in verdict.reason
@@ -144,14 +144,14 @@ def test_a_harm_confined_to_one_held_out_family_is_not_averaged_away():
 def test_an_accepted_policy_passed_every_test_and_the_reason_names_them():
     verdict, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False,
                                control=lambda f, s, seed: seed < 1)
-    assert not summary["significantly_worse"]["start"]["worse"]
+    assert not summary.to_dict()["significantly_worse"]["start"]["worse"]
     assert verdict.verdict == "ACCEPTED" and verdict.decided_by == "all"
     for text in ("regression test on the rest of the bank", "PASSed", "not significantly worse than the starting "
                  "policy", "not significantly worse than the control", "one-sided exact McNemar"):
         assert text in verdict.reason, text
     without_control, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False,
                                        control=None)
-    assert summary["significantly_worse"]["control"] is None
+    assert summary.to_dict()["significantly_worse"]["control"] is None
     assert without_control.verdict == "ACCEPTED" and "no control arm" in without_control.reason
 
 
@@ -159,7 +159,7 @@ def test_held_out_tests_that_could_not_run_leave_the_policy_not_accepted():
     """Below the held-out minimums no test runs, so the regression test's PASS alone does not accept the policy."""
     verdict, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False,
                                control=lambda f, s, seed: seed < 1, min_families=5)
-    assert summary["significantly_worse"] == {"start": None, "control": None} and summary["underpowered"]
+    assert summary.to_dict()["significantly_worse"] == {"start": None, "control": None} and summary.to_dict()["underpowered"]
     assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "heldout_vs_start"
     assert "did not run" in verdict.reason and "TOO SMALL TO JUDGE" in verdict.sentence
 
@@ -194,19 +194,19 @@ def test_minimums_of_zero_do_not_let_a_single_held_out_pair_be_judged():
 
     one = [{"scenario": "f0_s0", "seed": 0, "failed": False, "error": None}]
     summary = heldout_comparison(held(one), held(one), held(one), min_episodes=0, families={"f0_s0": "family_0"}, min_families=0)
-    assert summary["pairs"] == 1 and summary["heldout_families"] == 1
-    assert summary["significantly_worse"] == {"start": None, "control": None}
-    assert "fewer than 6" in summary["underpowered"] and "cannot reach p < 0.05" in summary["underpowered"]
+    assert summary.to_dict()["pairs"] == 1 and summary.to_dict()["heldout_families"] == 1
+    assert summary.to_dict()["significantly_worse"] == {"start": None, "control": None}
+    assert "fewer than 6" in summary.to_dict()["underpowered"] and "cannot reach p < 0.05" in summary.to_dict()["underpowered"]
     record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
               "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
     verdict = recommendation(_report(record))
     assert verdict.verdict == "NOT ACCEPTED" and "TOO SMALL TO JUDGE" in verdict.sentence
     # five pairs are still too few; six (all one family) are judged
     five = [{"scenario": "f0_s0", "seed": seed, "failed": False, "error": None} for seed in range(5)]
-    assert heldout_comparison(held(five), held(five), None, min_episodes=0, min_families=0)["underpowered"]
+    assert heldout_comparison(held(five), held(five), None, min_episodes=0, min_families=0).underpowered
     six = five + [{"scenario": "f0_s0", "seed": 5, "failed": False, "error": None}]
     judged = heldout_comparison(held(six), held(six), None, min_episodes=0, min_families=0)
-    assert "underpowered" not in judged and judged["significantly_worse"]["start"]["pairs"] == 6
+    assert "underpowered" not in judged.to_dict() and judged.to_dict()["significantly_worse"]["start"]["pairs"] == 6
 
 
 def test_the_recommendation_is_a_record_written_as_a_json_object_and_every_report_has_one(tmp_path):
@@ -268,11 +268,11 @@ def test_a_harm_in_one_family_the_gate_calls_inconclusive_is_not_accepted():
     margin, so the round is not accepted (and the control, failing everything, changes nothing)."""
     after = lambda f, s, seed: f == 3 and s * 4 + seed < 3  # noqa: E731
     verdict, summary = _judged(before=lambda f, s, seed: False, after=after, control=lambda f, s, seed: True)
-    start = summary["significantly_worse"]["start"]
+    start = summary.to_dict()["significantly_worse"]["start"]
     assert not start["worse"] and start["family_harm"]["harmed"] == ["family_3"]
     row = start["family_harm"]["families"]["family_3"]
     assert row["difference"] == pytest.approx(3 / 8) and not row["non_inferior"] and row["interval"][0] < 0
-    assert not summary["significantly_worse"]["control"]["family_harm"]["harmed"]
+    assert not summary.to_dict()["significantly_worse"]["control"]["family_harm"]["harmed"]
     assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "heldout_families_vs_start"
     assert "in family family_3 the fine-tuned policy failed 3 of 8 pairs" in verdict.reason
     assert "Holm" in verdict.reason and verdict.policy == "dv2s-ppo"
@@ -296,8 +296,8 @@ def test_a_harm_in_one_family_the_gate_calls_inconclusive_is_not_accepted():
 def test_a_harm_in_one_family_against_the_control_is_not_accepted_either():
     after = lambda f, s, seed: f == 0 and seed < 2  # noqa: E731  4 of family_0's 8 pairs
     verdict, summary = _judged(before=lambda f, s, seed: True, after=after, control=lambda f, s, seed: f > 0)
-    assert not summary["significantly_worse"]["control"]["worse"]
-    assert summary["significantly_worse"]["control"]["family_harm"]["harmed"] == ["family_0"]
+    assert not summary.to_dict()["significantly_worse"]["control"]["worse"]
+    assert summary.to_dict()["significantly_worse"]["control"]["family_harm"]["harmed"] == ["family_0"]
     assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "heldout_families_vs_control"
 
 
@@ -307,7 +307,7 @@ def test_a_round_no_worse_in_any_family_is_still_accepted():
     before = lambda f, s, seed: s == 0 and seed == 0  # noqa: E731
     after = lambda f, s, seed: s == 1 and seed == 0  # noqa: E731
     verdict, summary = _judged(before=before, after=after, control=None)
-    harm = summary["significantly_worse"]["start"]["family_harm"]
+    harm = summary.to_dict()["significantly_worse"]["start"]["family_harm"]
     assert harm["harmed"] == [] and harm["non_inferior"] == []  # 8 pairs per family cannot show it at 2 pp
     assert all(row["difference"] == 0 for row in harm["families"].values())
     assert verdict.verdict == "ACCEPTED" and "no held-out family worse for the fine-tuned policy" in verdict.reason
@@ -327,8 +327,8 @@ def test_non_inferiority_p_is_below_the_level_exactly_when_the_interval_is_below
     big = PairedTable(neither=400)
     alone = non_inferiority_p(big, 0.02)
     both = family_harm({"a": big, "b": big}, 0.02)
-    assert both["families"]["a"]["holm_p"] == pytest.approx(min(1.0, 2 * alone))
-    assert both["non_inferior"] == (["a", "b"] if 2 * alone < 0.025 else [])
+    assert both.to_dict()["families"]["a"]["holm_p"] == pytest.approx(min(1.0, 2 * alone))
+    assert both.to_dict()["non_inferior"] == (["a", "b"] if 2 * alone < 0.025 else [])
 
 
 def _accepted_round():
@@ -423,14 +423,14 @@ def test_a_family_exactly_at_the_margin_is_not_harmed_and_one_pair_more_is(pairs
     at = round(limit * pairs)
     assert at / pairs == limit  # the boundary is hit exactly, not by a rounding error
     equal = _one_family_round(at, pairs=pairs, margin=margin)
-    test = equal["steps"]["after"]["significantly_worse"]["start"]
+    test = equal["steps"]["after"].to_dict()["significantly_worse"]["start"]
     row = test["family_harm"]["families"]["F"]
     assert row["difference"] == limit and not row["harm"] and test["family_harm"]["harmed"] == []
     assert not test["worse"]  # the significance gate never fires here: only the harm rule decides
     verdict = recommendation(_report(equal))
     assert verdict.verdict == "ACCEPTED" and verdict.decided_by == "all"
     more = _one_family_round(at + 1, pairs=pairs, margin=margin)
-    test = more["steps"]["after"]["significantly_worse"]["start"]
+    test = more["steps"]["after"].to_dict()["significantly_worse"]["start"]
     assert not test["worse"] and test["family_harm"]["harmed"] == ["F"]
     verdict = recommendation(_report(more))
     assert verdict.verdict == "NOT ACCEPTED" and verdict.decided_by == "heldout_families_vs_start"
@@ -447,7 +447,7 @@ def test_family_non_inferiority_is_shown_at_one_sided_2_5_percent_after_holm_and
     from dv2s_gym.regress.stats import PairedTable, paired_difference_interval
 
     record = _one_family_round(0, pairs=10, other_only=3)
-    harm = record["steps"]["after"]["significantly_worse"]["start"]["family_harm"]
+    harm = record["steps"]["after"].to_dict()["significantly_worse"]["start"]["family_harm"]
     row = harm["families"]["F"]
     assert row["holm_p"] == row["non_inferiority_p"] == pytest.approx(0.0306, abs=5e-4)  # one family: Holm is p
     assert 0.025 < row["holm_p"] < 0.05
@@ -462,7 +462,7 @@ def test_family_non_inferiority_is_shown_at_one_sided_2_5_percent_after_holm_and
     assert "no family worse by more than the margin" in line and "F -30.0 pp (95% CI " in line
     assert line.endswith("; not shown)") and "one-sided 0.025" in line
     shown = _one_family_round(0, pairs=40, other_only=12)
-    row = shown["steps"]["after"]["significantly_worse"]["start"]["family_harm"]["families"]["F"]
+    row = shown["steps"]["after"].to_dict()["significantly_worse"]["start"]["family_harm"]["families"]["F"]
     assert row["holm_p"] < 0.025 and row["non_inferior"]
     line = next(text for text in render_markdown(written_report(_report(shown))).splitlines()
                 if text.startswith("- held-out families against the starting"))
@@ -472,8 +472,8 @@ def test_family_non_inferiority_is_shown_at_one_sided_2_5_percent_after_holm_and
     p = non_inferiority_p(alone, 0.02)
     assert 0.0125 < p < 0.025 < 2 * p < 0.05
     both = family_harm({"a": alone, "b": alone}, 0.02)
-    assert both["families"]["a"]["holm_p"] == pytest.approx(2 * p) and both["non_inferior"] == []
-    assert family_harm({"a": alone}, 0.02)["non_inferior"] == ["a"]
+    assert both.to_dict()["families"]["a"]["holm_p"] == pytest.approx(2 * p) and both.to_dict()["non_inferior"] == []
+    assert family_harm({"a": alone}, 0.02).to_dict()["non_inferior"] == ["a"]
 
 
 def test_the_point_estimate_alone_decides_harm_and_the_non_inferiority_test_never_overrides_it():
@@ -489,7 +489,7 @@ def test_the_point_estimate_alone_decides_harm_and_the_non_inferiority_test_neve
             for c in range(n + 1):
                 for b in range(n - c + 1):
                     table = PairedTable(candidate_only=c, baseline_only=b, neither=n - c - b)
-                    row = family_harm({"f": table, "g": other}, margin)["families"]["f"]
+                    row = family_harm({"f": table, "g": other}, margin).to_dict()["families"]["f"]
                     assert row["harm"] == (table.difference > margin), (table, margin)
                     if table.difference >= margin:
                         assert non_inferiority_p(table, margin) == 1.0 and not row["non_inferior"]
@@ -515,22 +515,22 @@ def test_the_held_out_gate_has_no_margin_and_says_against_whom_and_where():
     assert heldout_worse({}, "start") is None  # no pairs, no test
     assert heldout_worse({"F": PairedTable()}, "start") is None
     start, control = _held_out_test("start", candidate_only=2, baseline_only=3), _held_out_test("control")
-    assert "only the fine-tuned policy failed 2, only the starting policy 3; pooled one-sided p = " in start["reason"]
-    assert "only the fine-tuned policy failed 0, only the control 4;" in control["reason"]
-    assert start["reason"].endswith("; not significantly worse") and not start["worse"]
+    assert "only the fine-tuned policy failed 2, only the starting policy 3; pooled one-sided p = " in start.to_dict()["reason"]
+    assert "only the fine-tuned policy failed 0, only the control 4;" in control.to_dict()["reason"]
+    assert start.to_dict()["reason"].endswith("; not significantly worse") and not start.to_dict()["worse"]
     # worse pooled only (no family on its own): no family is named
     spread = heldout_worse({name: PairedTable(candidate_only=2, neither=6) for name in "abcd"}, "start")
-    assert spread["worse"] and spread["worse_families"] == [] and spread["reason"].endswith("; significantly worse")
+    assert spread.worse and spread.worse_families == () and spread.reason.endswith("; significantly worse")
     one = heldout_worse({"a": PairedTable(candidate_only=8), "b": PairedTable(neither=8)}, "control")
-    assert one["worse"] and one["reason"].endswith("significantly worse (in family a)")
+    assert one.worse and one.reason.endswith("significantly worse (in family a)")
     two = heldout_worse({"a": PairedTable(candidate_only=9), "b": PairedTable(candidate_only=9)}, "start")
-    assert two["reason"].endswith("significantly worse (in families a, b)")
+    assert two.to_dict()["reason"].endswith("significantly worse (in families a, b)")
     # dv2s regress's gate with no margin: a small harm on many pairs is significantly worse
     # (+0.5 pp on 100,000 pairs, upper 95 % bound +0.56 pp), which the harm rule at the 2 pp margin lets through
     table = PairedTable(candidate_only=600, baseline_only=100, neither=99_300)
     many = heldout_worse({"F": table}, "start")
-    assert many["worse"] and many["worse_families"] == ["F"] and many["family_harm"]["harmed"] == []
-    assert heldout_worse({"F": table}, "start", margin=0.002)["family_harm"]["harmed"] == ["F"]
+    assert many.to_dict()["worse"] and many.to_dict()["worse_families"] == ["F"] and many.to_dict()["family_harm"]["harmed"] == []
+    assert heldout_worse({"F": table}, "start", margin=0.002).to_dict()["family_harm"]["harmed"] == ["F"]
 
 
 def test_a_round_is_judged_once_it_fine_tuned_or_named_a_policy():
@@ -614,7 +614,7 @@ def test_family_non_inferiority_at_the_edge_of_one_sided_2_5_percent():
     from dv2s_gym.loop.verdict import family_harm
     from dv2s_gym.regress.stats import PairedTable
 
-    below = family_harm({"f": PairedTable(baseline_only=3, neither=52)}, 0.02)["families"]["f"]
-    above = family_harm({"f": PairedTable(candidate_only=2, baseline_only=7, neither=49)}, 0.02)["families"]["f"]
+    below = family_harm({"f": PairedTable(baseline_only=3, neither=52)}, 0.02).to_dict()["families"]["f"]
+    above = family_harm({"f": PairedTable(candidate_only=2, baseline_only=7, neither=49)}, 0.02).to_dict()["families"]["f"]
     assert 0.0249 < below["holm_p"] < 0.025 < above["holm_p"] < 0.0251
     assert below["non_inferior"] and not above["non_inferior"] and not below["harm"] and not above["harm"]

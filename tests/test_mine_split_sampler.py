@@ -130,4 +130,4 @@ def test_a_split_mining_run_killed_mid_way_resumes_to_the_same_records(tmp_path,
     (cut / "sampler.pkl").unlink()  # rebuilt from the records alone, with a larger budget
     longer = mine(POLICY, out=cut, workers=1, **{**RUN, "budget": 14})
     assert _stable(longer.records[:12]) == _stable(whole.records)
-    assert [r["scenario"] for r in whole.records] and {r["scenario"] for r in whole.records} <= {BRAKES, LEFT_TURN}
+    assert [r.to_dict()["scenario"] for r in whole.records] and {r.to_dict()["scenario"] for r in whole.records} <= {BRAKES, LEFT_TURN}

@@ -108,10 +108,10 @@ def test_a_streamed_run_is_the_same_on_one_and_two_workers(streamed, tmp_path):
     out, one = streamed
     assert json.loads((out / "settings.json").read_text())["schedule"] == "window"
     two = mine(POLICY, out=tmp_path / "two", workers=2, **RUN)
-    assert [r["index"] for r in two.records] == list(range(12))
-    assert [r["seed"] for r in two.records] == [episode_seed(7, i) for i in range(12)]
+    assert [r.to_dict()["index"] for r in two.records] == list(range(12))
+    assert [r.to_dict()["seed"] for r in two.records] == [episode_seed(7, i) for i in range(12)]
     assert _stable(two.records) == _stable(one.records)
-    assert any(r["failure"] for r in one.records) and any(not r["failure"] for r in one.records)
+    assert any(r.to_dict()["failure"] for r in one.records) and any(not r.to_dict()["failure"] for r in one.records)
 
 
 @pytest.mark.slow
@@ -199,6 +199,6 @@ def test_without_a_batch_one_and_two_workers_write_the_same_episodes(sampler, tm
     assert one.policy == POLICY and isinstance(one.settings, MineSettings)
     assert one.settings.batch == DEFAULT_BATCH and one.settings.scenarios == tuple(settings[0]["scenarios"])
     assert {key: settings[0][key] for key in one.settings.recorded()} == one.settings.recorded()
-    assert [r["index"] for r in two.records] == list(range(10))
+    assert [r.to_dict()["index"] for r in two.records] == list(range(10))
     lines = [sorted((out / "episodes.jsonl").read_text().splitlines()) for out in (tmp_path / "one", tmp_path / "two")]
     assert lines[0] == lines[1]

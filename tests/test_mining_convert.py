@@ -55,7 +55,7 @@ def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane
     record = run_mine_task(MineTask(index=index, policy=policy, scenario=scenario, seed=seed, params=params,
                                     bank_dir=bank_dir,
                                     monitor=MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)).to_json())
-    assert record["error"] is None and record["failure"]["type"] == "collision", record
+    assert record.error is None and record.failure["type"] == "collision", record
     return {**record.to_dict(), "family": scenario_family(scenario, bank_dir)}  # as episodes.jsonl holds it
 
 
@@ -135,79 +135,79 @@ def test_failure_class_rule():
 def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(record, tmp_path):
     bank = Bank(tmp_path / "bank")
     out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=bank, cluster=f"{SCENARIO}/collision/0")
-    assert out["status"] == "kept", out["reason"]
-    assert out["reason"] is None and out["merged_into"] is None
-    repro = out["reproduction"]
+    assert out.to_dict()["status"] == "kept", out.to_dict()["reason"]
+    assert out.to_dict()["reason"] is None and out.to_dict()["merged_into"] is None
+    repro = out.to_dict()["reproduction"]
     assert repro["k"] == 10 and repro["rate"] == repro["reproduced"] / 10 >= 0.3
     assert repro["interval"][0] <= repro["rate"] <= repro["interval"][1]
-    assert 0.0 <= out["e2e_sc"] <= 1.0
+    assert 0.0 <= out.to_dict()["e2e_sc"] <= 1.0
     folder = tmp_path / "run" / "failures" / f"{SCENARIO}__collision__0"
-    assert out["video"] == f"failures/{SCENARIO}__collision__0/failure.webm" and (folder / "failure.webm").is_file()
+    assert out.to_dict()["video"] == f"failures/{SCENARIO}__collision__0/failure.webm" and (folder / "failure.webm").is_file()
     for name in ("trace.json.gz", "conversion/description.txt", "conversion/elements.json",
                  "conversion/scenario.scenic", "conversion/report.json"):
         assert (folder / name).is_file(), name
     report = json.loads((folder / "conversion" / "report.json").read_text())
     assert report["status"] == "kept" and len(report["reproduction_episodes"]) == 10
-    assert set(out["timings"]) == {"video", "interaction", "replay", "describe", "generate", "check", "reproduction",
+    assert set(out.to_dict()["timings"]) == {"video", "interaction", "replay", "describe", "generate", "check", "reproduction",
                                    "avoidability", "e2e_sc", "clip", "bank"}
     # the converted script driven by the same policy, filmed on a reproduction episode that failed the same way
     clip = repro["clip"]
     chosen = next(e for e in report["reproduction_episodes"] if e["reproduced"])
     assert clip["seed"] == chosen["seed"] and clip["reproduced"] and clip["failed"]
     assert clip["failure"]["type"] == "collision" and clip["file"] == "converted.webm" and "error" not in clip
-    assert out["converted_video"] == f"failures/{SCENARIO}__collision__0/conversion/converted.webm"
+    assert out.to_dict()["converted_video"] == f"failures/{SCENARIO}__collision__0/conversion/converted.webm"
     frames = read_video(folder / "conversion" / "converted.webm", fps=None, max_frames=1000, max_pixels=10**7).frames
     # 4 s before the collision (or from the reset when it came sooner), 1 s after, at 5 Hz
     assert len(frames) == min(chosen["failure"]["step"], 4 * 5) + 5 + 1 and frames[0].shape[:2] == (480, 480)
     assert _red_pixels(frames[0]) == 0 and _red_pixels(frames[-1]) > 20  # the crash shows
     # the judge: the stopped car the ego ran into shows in the runs, the policy fails on it the same way, and
     # the reference driver avoids it
-    assert out["interaction"]["kind"] == "car" and out["interaction"]["manoeuvres"] == ["stop"]
-    assert out["interaction"]["gap_m"] == pytest.approx(record["params"]["stopped_gap"], abs=0.5)
-    assert repro["interaction_shown"] >= 3 and out["rejections"] == []
-    assert out["avoidability"]["reference"] == "rule" and out["avoidability"]["avoided_rate"] > 0.5
+    assert out.to_dict()["interaction"]["kind"] == "car" and out.to_dict()["interaction"]["manoeuvres"] == ["stop"]
+    assert out.to_dict()["interaction"]["gap_m"] == pytest.approx(record["params"]["stopped_gap"], abs=0.5)
+    assert repro["interaction_shown"] >= 3 and out.to_dict()["rejections"] == []
+    assert out.to_dict()["avoidability"]["reference"] == "rule" and out.to_dict()["avoidability"]["avoided_rate"] > 0.5
 
     fresh = Bank(tmp_path / "bank")  # as another process sees it
-    assert fresh.names() == sorted([out["bank_entry"], out["replay_entry"]]) and not fresh.problems
+    assert fresh.names() == sorted([out.to_dict()["bank_entry"], out.to_dict()["replay_entry"]]) and not fresh.problems
     # the failing scene itself, kept exactly: running the replay entry is the recorded episode, step for step
-    replay = fresh.get(out["replay_entry"])
+    replay = fresh.get(out.to_dict()["replay_entry"])
     assert {"mined", "replay", "collision"} <= set(replay.tags)
     assert replay.source.replay["seed"] == 0 and replay.source.replay["params"] == record["params"]
-    assert replay.source.converted == out["bank_entry"] and replay.source.extra["converted_e2e_sc"] == out["e2e_sc"]
+    assert replay.source.converted == out.to_dict()["bank_entry"] and replay.source.extra["converted_e2e_sc"] == out.to_dict()["e2e_sc"]
     assert replay.source.e2e_sc == 1.0
     for name, (low, high) in replay.source.replay["intervals"].items():
         assert low <= record["params"][name] <= high
         assert f"Range({low!r}, {high!r})" in replay.script or (low == high and "fixed at the failing" in replay.script)
     assert isinstance(replay.source.replay["not_narrowed"], dict)
-    rerun = replay_failure(fresh, out["replay_entry"])
+    rerun = replay_failure(fresh, out.to_dict()["replay_entry"])
     assert rerun["matches"] and rerun["trajectory_hash"] == record["result"]["trajectory_hash"]
     assert same_failure_class(record["failure"], rerun["failure"])
-    entry = fresh.get(out["bank_entry"])
+    entry = fresh.get(out.to_dict()["bank_entry"])
     source = entry.source
     assert source["kind"] == "mined" and source["parent"] == SCENARIO and source["seed"] == 0
     portable = {**record["result"]["params"], "map": "urban_two_way.xodr"}  # the map by name, not by path
     assert source["params"] == portable and source["params"]["ego_speed"] == record["params"]["ego_speed"]
     assert source["video"].endswith("failure.webm") and source["policy"] == "keep_lane"
     assert source["backends"] == {"dra": "bev", "sg": "rules"}
-    assert source["reproduction"] == repro and source["e2e_sc"] == out["e2e_sc"]
+    assert source["reproduction"] == repro and source["e2e_sc"] == out.to_dict()["e2e_sc"]
     assert source["failure"] == record["failure"] and source["failure"]["collision_type"] == "rear_end"
     assert source["cluster"] == f"{SCENARIO}/collision/0"
-    assert entry.description == out["description"] and "mined" in entry.tags
+    assert entry.description == out.to_dict()["description"] and "mined" in entry.tags
     assert entry.script == (folder / "conversion" / "scenario.scenic").read_text()
-    assert source["replay_entry"] == out["replay_entry"] and source["interaction"] == out["interaction"]
+    assert source["replay_entry"] == out.to_dict()["replay_entry"] and source["interaction"] == out.to_dict()["interaction"]
     assert source["converted_video"] == "converted.webm" and "converted.webm" in source["files"]
     assert (entry.folder / "converted.webm").read_bytes() == (folder / "conversion" / "converted.webm").read_bytes()
 
     _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_path)
 
     again = convert_failure({**record, "index": 5}, tmp_path / "run2", KEEP_LANE, bank=bank)
-    assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
-    merged = Bank(tmp_path / "bank").get(out["bank_entry"]).source.merged
+    assert again.to_dict()["status"] == "merged" and again.to_dict()["merged_into"] == out.to_dict()["bank_entry"], again.to_dict()["reason"]
+    merged = Bank(tmp_path / "bank").get(out.to_dict()["bank_entry"]).source.merged
     assert len(merged) == 1 and merged[0]["index"] == 5 and merged[0]["parent"] == SCENARIO
     assert merged[0]["converted_video"] == "merged/1/converted.webm"
     assert (entry.folder / "merged" / "1" / "converted.webm").is_file()
-    assert again["replay_entry"] == out["replay_entry"]  # the same failing scene: its replay is not added twice
-    assert Bank(tmp_path / "bank").names() == sorted([out["bank_entry"], out["replay_entry"]])
+    assert again.to_dict()["replay_entry"] == out.to_dict()["replay_entry"]  # the same failing scene: its replay is not added twice
+    assert Bank(tmp_path / "bank").names() == sorted([out.to_dict()["bank_entry"], out.to_dict()["replay_entry"]])
 
 
 def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_path):
@@ -257,12 +257,12 @@ def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
     # the collision was with a car; as a collision with a truck, the new scenario never reproduces it
     truck = {**record, "failure": {**record["failure"], "with_kind": "truck"}}
     out = convert_failure(truck, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "reproduction"
-    assert out["reproduction"]["reproduced"] == 0 and out["reproduction"]["rate"] == 0.0
-    assert out["reason"].startswith("reproduction: ") and "0 of 10" in out["reason"]
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "reproduction"
+    assert out.to_dict()["reproduction"]["reproduced"] == 0 and out.to_dict()["reproduction"]["rate"] == 0.0
+    assert out.to_dict()["reason"].startswith("reproduction: ") and "0 of 10" in out.to_dict()["reason"]
     # the interaction is read from the trace, where the stopped actor is a car, and the new scenario shows it
-    assert out["interaction"]["kind"] == "car" and out["rejections"] == [out["reason"]]
-    assert out["e2e_sc"] is not None  # measured either way
+    assert out.to_dict()["interaction"]["kind"] == "car" and out.to_dict()["rejections"] == [out.to_dict()["reason"]]
+    assert out.to_dict()["e2e_sc"] is not None  # measured either way
     assert _converted(tmp_path / "bank") == []
 
 
@@ -292,10 +292,10 @@ def test_an_unsafe_script_is_rejected_at_the_check(record, tmp_path, monkeypatch
     _patch_generator(monkeypatch, "param map = 'highway_straight'\nmodel scenic.domains.driving.model\n"
                                   "import os\nego = new Car\n")
     out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "check"
-    assert out["reason"].startswith("check: safety failed") and "import" in out["reason"]
-    assert out["reproduction"] is None and out["bank_entry"] is None
-    assert _converted(tmp_path / "bank") == [] and out["replay_entry"] in Bank(tmp_path / "bank")
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "check"
+    assert out.to_dict()["reason"].startswith("check: safety failed") and "import" in out.to_dict()["reason"]
+    assert out.to_dict()["reproduction"] is None and out.to_dict()["bank_entry"] is None
+    assert _converted(tmp_path / "bank") == [] and out.to_dict()["replay_entry"] in Bank(tmp_path / "bank")
 
 
 @pytest.mark.slow
@@ -303,8 +303,8 @@ def test_a_script_failing_in_the_sandbox_is_rejected_with_its_stage(record, tmp_
     _patch_generator(monkeypatch, "param map = 'highway_straight'\nmodel scenic.domains.driving.model\n"
                                   "ego = new Car with behavior NoSuchBehavior()\n")
     out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "check", out
-    assert "sandboxed check" in out["reason"] and "NoSuchBehavior" in out["reason"]
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "check", out
+    assert "sandboxed check" in out.to_dict()["reason"] and "NoSuchBehavior" in out.to_dict()["reason"]
     assert _converted(tmp_path / "bank") == []
 
 
@@ -329,22 +329,22 @@ def test_the_conversion_entry_points_take_one_settings_record_and_no_loose_optio
 
 def test_a_record_without_a_failure_is_rejected_not_raised(record, tmp_path):
     out = convert_failure({**record, "failure": None}, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "input"
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "input"
     out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=0), bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "input" and "k >= 1" in out["reason"]
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "input" and "k >= 1" in out.to_dict()["reason"]
     out = convert_failure({**record, "seed": 1}, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "video" and "diverged" in out["reason"]
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "video" and "diverged" in out.to_dict()["reason"]
     out = convert_failure({**record, "params": {"no_such_param": 1}}, tmp_path / "run", KEEP_LANE,
                           bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "video"
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "video"
 
 
 @pytest.mark.slow
 def test_a_minimal_failure_record_is_completed_from_the_monitors(record, tmp_path):
     minimal = {**record, "failure": {"type": "collision", "time": record["failure"]["time"]}}
     out = convert_failure(minimal, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "kept", out["reason"]
-    failure = Bank(tmp_path / "bank").get(out["bank_entry"]).source.failure
+    assert out.to_dict()["status"] == "kept", out.to_dict()["reason"]
+    failure = Bank(tmp_path / "bank").get(out.to_dict()["bank_entry"]).source.failure
     assert failure["with_kind"] == "car" and failure["collision_type"] == "rear_end"
 
 
@@ -461,15 +461,15 @@ def test_a_script_without_the_failures_interaction_is_rejected_though_the_policy
     assert moving != Bank().get(SCENARIO).script
     _patch_generator(monkeypatch, moving)
     out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "interaction", out
-    assert out["reproduction"]["rate"] >= 0.3  # the policy does fail on it, the same way ...
-    assert out["reproduction"]["interaction_shown"] == 0  # ... but never with a car that stops
-    assert out["rejections"] == [out["reason"]] and out["reason"].startswith("interaction: ")
-    assert "car (stop)" in out["reason"]
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "interaction", out
+    assert out.to_dict()["reproduction"]["rate"] >= 0.3  # the policy does fail on it, the same way ...
+    assert out.to_dict()["reproduction"]["interaction_shown"] == 0  # ... but never with a car that stops
+    assert out.to_dict()["rejections"] == [out.to_dict()["reason"]] and out.to_dict()["reason"].startswith("interaction: ")
+    assert "car (stop)" in out.to_dict()["reason"]
     assert _converted(tmp_path / "bank") == []
     # the failure itself is kept exactly all the same
-    replay = Bank(tmp_path / "bank").get(out["replay_entry"])
-    assert replay.source["converted"] is None and replay.source["converted_rejections"] == [out["reason"]]
+    replay = Bank(tmp_path / "bank").get(out.to_dict()["replay_entry"])
+    assert replay.source["converted"] is None and replay.source["converted_rejections"] == [out.to_dict()["reason"]]
 
 
 def test_each_failed_check_of_the_judge_is_its_own_reason():
@@ -578,20 +578,20 @@ def test_a_script_on_which_the_reference_fails_another_way_is_rejected(record, t
         "    with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed + 5)\n")
     _patch_generator(monkeypatch, chaser)
     out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=4), bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "avoidability", out
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "avoidability", out
     # the chaser is also a car the failure's scene did not have: the judge names that too
-    assert out["reproduction"]["reproduced"] == 4 and out["rejections"] == [
-        out["reason"], "actors: the failure's scene has 2 actors (car 2), the new scenario's 3 actors (car 3): "
+    assert out.to_dict()["reproduction"]["reproduced"] == 4 and out.to_dict()["rejections"] == [
+        out.to_dict()["reason"], "actors: the failure's scene has 2 actors (car 2), the new scenario's 3 actors (car 3): "
                        "1 car more"]
-    avoid = out["avoidability"]
+    avoid = out.to_dict()["avoidability"]
     assert avoid["failed"] == 4 and avoid["avoided_rate"] == 0.0
     assert avoid["failures"] == {"collision:struck_from_behind": 4}
-    assert "rule failed in 4 of 4" in out["reason"] and "collision:struck_from_behind 4" in out["reason"]
+    assert "rule failed in 4 of 4" in out.to_dict()["reason"] and "collision:struck_from_behind 4" in out.to_dict()["reason"]
     assert _converted(tmp_path / "bank") == []
-    report = json.loads((tmp_path / "run" / out["script"]).with_name("report.json").read_text())
+    report = json.loads((tmp_path / "run" / out.to_dict()["script"]).with_name("report.json").read_text())
     assert [e["failure"]["collision_type"] for e in report["reference_episodes"]] == ["struck_from_behind"] * 4
-    replay = Bank(tmp_path / "bank").get(out["replay_entry"])  # the failing scene is kept exactly all the same
-    assert replay.source.extra["converted_rejections"] == out["rejections"]
+    replay = Bank(tmp_path / "bank").get(out.to_dict()["replay_entry"])  # the failing scene is kept exactly all the same
+    assert replay.source.extra["converted_rejections"] == out.to_dict()["rejections"]
 
 
 @pytest.mark.slow
@@ -841,7 +841,7 @@ def test_the_mining_report_counts_the_failing_parameters_the_judge_could_not_com
                     "parameters": {"compared": {"a": {}}, "outside": [], "not_in_script": ["e"],
                                    "not_comparable": {"e": _NO_COUNTERPART}}}]
     report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
-    assert report["counts"]["parameters_compared"] == 3 and report["counts"]["parameters_not_compared"] == 3
+    assert report.to_dict()["counts"]["parameters_compared"] == 3 and report.to_dict()["counts"]["parameters_not_compared"] == 3
     assert "3 failing parameter value(s) compared with the new scripts' ranges, 3 not compared" in markdown(report)
 
 
@@ -875,7 +875,7 @@ def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_coun
                     "parameters": {"compared": {"a": {}}, "outside": [], "not_in_script": ["e", "f"],
                                    "not_comparable": {"e": _NO_COUNTERPART, "f": _NO_COUNTERPART}}}]
     report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
-    counts = report["counts"]
+    counts = report.to_dict()["counts"]
     assert counts["parameters_not_compared"] == 6
     assert counts["parameters_not_compared_by_reason"] == {"no_counterpart": 2, "not_interval": 1,
                                                            "reaches_no_object": 2, "feeds_no_object": 1}
@@ -1261,8 +1261,8 @@ def test_a_clip_that_cannot_be_written_is_recorded_without_this_machines_paths(r
     monkeypatch.setattr(convert_module, "write_script_episode_video", full_disk)  # where convert calls it
     out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=Bank(tmp_path / "bank"),
                           cluster=f"{SCENARIO}/collision/0")
-    assert out["status"] == "kept", out["reason"]
-    clip = out["reproduction"]["clip"]
+    assert out.to_dict()["status"] == "kept", out.to_dict()["reason"]
+    clip = out.to_dict()["reproduction"]["clip"]
     assert clip["file"] is None and "No space left on device" in clip["error"]
     assert f"failures/{SCENARIO}__collision__0/conversion/converted.webm" in clip["error"]
     assert str(tmp_path) not in clip["error"]

@@ -606,13 +606,13 @@ def _mine_with_a_crash(tmp_path, once: bool):
 @pytest.mark.slow
 def test_a_crashing_worker_gives_an_error_record_and_the_run_completes(tmp_path):
     run, crash_seed, log = _mine_with_a_crash(tmp_path, once=False)
-    assert [r["index"] for r in run.records] == [0, 1, 2]
+    assert [r.to_dict()["index"] for r in run.records] == [0, 1, 2]
     assert log.read_text().split() == [str(crash_seed)] * 2  # tried again once in a new worker
-    error = run.records[1]["error"]
+    error = run.records[1].to_dict()["error"]
     assert error and "crashed" in error and str(crash_seed) in error
-    assert run.records[1]["failure"] is None and run.records[1]["result"] is None
-    assert not run.records[0]["error"] and not run.records[2]["error"]
-    assert run.records[0]["result"]["trajectory_hash"]
+    assert run.records[1].to_dict()["failure"] is None and run.records[1].to_dict()["result"] is None
+    assert not run.records[0].to_dict()["error"] and not run.records[2].to_dict()["error"]
+    assert run.records[0].to_dict()["result"]["trajectory_hash"]
     assert len(read_records(tmp_path / "run" / "episodes.jsonl")) == 3
 
 
@@ -621,8 +621,8 @@ def test_an_episode_finished_after_its_worker_crashed_is_reported(tmp_path):
     # the retry used to succeed silently: nothing in the record, report or summary said a worker had died
     run, crash_seed, log = _mine_with_a_crash(tmp_path, once=True)
     assert log.read_text().split() == [str(crash_seed)]  # crashed once; the retry ran it to the end
-    assert not any(r["error"] for r in run.records) and run.records[1]["result"]["trajectory_hash"]
-    restarts = run.records[1]["worker_restarts"]
+    assert not any(r.to_dict()["error"] for r in run.records) and run.records[1].to_dict()["result"]["trajectory_hash"]
+    restarts = run.records[1].to_dict()["worker_restarts"]
     assert len(restarts) == 1 and "crashed" in restarts[0]
     assert "worker_restarts" not in run.records[0] and "worker_restarts" not in run.records[2]
     assert "1 finished after their worker crashed or hung" in run.summary()
@@ -641,8 +641,8 @@ def test_every_episode_crashing_still_completes_with_error_records(tmp_path):
     run = mine("regress_misbehaving_policies:crash", out=tmp_path / "run", budget=2, sampler="random",
                scenarios=[BRAKES], workers=2, seed=0, reference=None, env_config={"duration": 2}, progress=False,
                reports=False)
-    assert [r["index"] for r in run.records] == [0, 1]
-    assert all("crashed" in r["error"] for r in run.records) and not run.failures
+    assert [r.to_dict()["index"] for r in run.records] == [0, 1]
+    assert all("crashed" in r.to_dict()["error"] for r in run.records) and not run.failures
 
 
 _HOLDER = """

@@ -39,14 +39,14 @@ def record() -> dict:
 def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(record, tmp_path):
     bank = Bank(tmp_path / "bank")
     out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=3), bank=bank, cluster=f"{SCENARIO}/collision/0")
-    assert out["status"] == "kept", out["reason"]
+    assert out.to_dict()["status"] == "kept", out.to_dict()["reason"]
     again = convert_failure({**record, "index": 5}, tmp_path / "run2", KEEP_LANE.replace(k=3), bank=bank)
-    assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
-    frames = len(read_video(tmp_path / "run" / out["video"], fps=None, max_frames=1000, max_pixels=10**7).frames)
+    assert again.to_dict()["status"] == "merged" and again.to_dict()["merged_into"] == out.to_dict()["bank_entry"], again.to_dict()["reason"]
+    frames = len(read_video(tmp_path / "run" / out.to_dict()["video"], fps=None, max_frames=1000, max_pixels=10**7).frames)
     shutil.rmtree(tmp_path / "run")
     shutil.rmtree(tmp_path / "run2")
 
-    entry = Bank(tmp_path / "bank").get(out["bank_entry"])
+    entry = Bank(tmp_path / "bank").get(out.to_dict()["bank_entry"])
     source = entry.source
     assert source["video"] == "failure.webm" and source["trace"] == "trace.json.gz"
     assert source["merged"][0]["video"] == "merged/1/failure.webm"

@@ -85,9 +85,9 @@ def test_the_stall_names_the_braking_car_far_ahead():
     trace = stall_behind_braking_car()
     assert key_actor(trace, STALL) == "lead"  # in the ego's lane ahead; the cars beside it are not
     interaction = failure_interaction(trace, STALL)
-    assert interaction["kind"] == "car" and interaction["side"] == "same_lane"
-    assert {"brake", "stop"} <= set(interaction["manoeuvres"])
-    assert interaction["gap_m"] == 63.0
+    assert interaction.to_dict()["kind"] == "car" and interaction.to_dict()["side"] == "same_lane"
+    assert {"brake", "stop"} <= set(interaction.to_dict()["manoeuvres"])
+    assert interaction.to_dict()["gap_m"] == 63.0
     sentence = interaction_sentence(interaction)
     assert "63 m ahead" in sentence and "brakes" in sentence, sentence
     said = elements_from_text("The ego car drives in the right lane of a highway with three other cars nearby. "
@@ -98,8 +98,8 @@ def test_the_stall_names_the_braking_car_far_ahead():
 def test_the_cut_in_names_the_car_cutting_in_from_the_left():
     trace = cut_in_with_large_gap()
     interaction = failure_interaction(trace, CUT_IN)
-    assert interaction["actor"] == "cutter" and interaction["side"] == "left" and interaction["gap_m"] == 63.0
-    assert interaction["manoeuvres"][0] == "cut_in" and "lane_change_right" in interaction["manoeuvres"]
+    assert interaction.to_dict()["actor"] == "cutter" and interaction.to_dict()["side"] == "left" and interaction.to_dict()["gap_m"] == 63.0
+    assert interaction.to_dict()["manoeuvres"][0] == "cut_in" and "lane_change_right" in interaction.to_dict()["manoeuvres"]
     sentence = interaction_sentence(interaction)
     assert "cuts into the ego's lane" in sentence and "left" in sentence, sentence
     assert ["car", "cut_in"] in elements_from_text(sentence)["actions"]

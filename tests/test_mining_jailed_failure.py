@@ -65,13 +65,13 @@ def test_a_failure_in_a_jailed_scenario_gets_its_video_and_its_exact_replay(reco
 
     monkeypatch.setattr(stages, "describe", no_description)
     out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=2, before=1.0, after=1.0), bank=user_bank)
-    assert out["stage"] == "describe", out  # past the video and the replay
-    assert out["timings"].keys() >= {"video", "interaction", "replay"}
-    clip = read_video(tmp_path / "run" / out["video"], fps=None, max_frames=1000, max_pixels=10**7)
+    assert out.to_dict()["stage"] == "describe", out  # past the video and the replay
+    assert out.to_dict()["timings"].keys() >= {"video", "interaction", "replay"}
+    clip = read_video(tmp_path / "run" / out.to_dict()["video"], fps=None, max_frames=1000, max_pixels=10**7)
     k = record["failure"]["step"]
     assert k + 5 > record["result"]["steps"]  # the last second was driven past the episode's end, in the jail
     assert len(clip.frames) == 11  # 1 s before, the failure's frame, 1 s after at 5 frames per second
-    rerun = replay_failure(user_bank, out["replay_entry"])
+    rerun = replay_failure(user_bank, out.to_dict()["replay_entry"])
     assert rerun["matches"] and rerun["failure"]["type"] == "collision"
 
 
@@ -86,16 +86,16 @@ def test_the_exact_replay_is_kept_when_the_video_stage_fails(record, user_bank, 
     bank = tmp_path / "bank"
     Bank(bank).add(STOPPED_VAN, Sidecar(description="A van stands still in the ego's lane.", name=NAME))
     out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=2), bank=bank)
-    assert out["status"] == "rejected" and out["stage"] == "video"
-    assert out["reason"] == "video: OSError: no space left on device" and out["rejections"] == [out["reason"]]
-    assert out["video"] is None and out["replay_entry"] is not None
-    entry = Bank(bank).get(out["replay_entry"])
-    assert entry.source["converted_rejections"] == [out["reason"]]
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "video"
+    assert out.to_dict()["reason"] == "video: OSError: no space left on device" and out.to_dict()["rejections"] == [out.to_dict()["reason"]]
+    assert out.to_dict()["video"] is None and out.to_dict()["replay_entry"] is not None
+    entry = Bank(bank).get(out.to_dict()["replay_entry"])
+    assert entry.source["converted_rejections"] == [out.to_dict()["reason"]]
     assert entry.source["video"] is None and entry.source["trace"] == "trace.json.gz"
-    assert replay_failure(bank, out["replay_entry"])["matches"]
+    assert replay_failure(bank, out.to_dict()["replay_entry"])["matches"]
     # a replay that fails as well is recorded beside the video's reason
     diverged = convert_failure({**record, "result": {**record["result"], "trajectory_hash": "0" * 64}},
                                tmp_path / "run2", KEEP_LANE.replace(k=2), bank=bank)
-    assert diverged["stage"] == "video" and diverged["replay_entry"] is None
-    assert [r.split(":")[0] for r in diverged["rejections"]] == ["video", "replay"]
-    assert "does not replay the failing episode" in diverged["rejections"][1]
+    assert diverged.to_dict()["stage"] == "video" and diverged.to_dict()["replay_entry"] is None
+    assert [r.split(":")[0] for r in diverged.to_dict()["rejections"]] == ["video", "replay"]
+    assert "does not replay the failing episode" in diverged.to_dict()["rejections"][1]

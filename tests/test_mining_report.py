@@ -158,9 +158,9 @@ def report(run_dir) -> dict:
 
 
 def test_counts(report):
-    counts = report["counts"]
+    counts = report.to_dict()["counts"]
     assert counts["episodes"] == 19 and counts["errors"] == 1  # the torn 21st line is left out
-    assert report["skipped_lines"] == {"episodes.jsonl": 1}
+    assert report.to_dict()["skipped_lines"] == {"episodes.jsonl": 1}
     assert counts["failures"] == 10
     assert counts["failures_by_type"] == {"collision": 5, "off_road": 3, "low_ttc": 1, "stall": 1}
     assert (counts["avoidable"], counts["unavoidable"], counts["avoidability_unknown"]) == (6, 3, 1)
@@ -173,7 +173,7 @@ def test_counts(report):
 
 
 def test_per_sampler_rates_have_wilson_intervals(report):
-    ce, rnd = report["samplers"]["cross-entropy"], report["samplers"]["random"]
+    ce, rnd = report.to_dict()["samplers"]["cross-entropy"], report.to_dict()["samplers"]["random"]
     assert (ce["episodes"], ce["errors"], ce["failures"], ce["avoidable_failures"]) == (11, 1, 8, 5)
     assert (rnd["episodes"], rnd["errors"], rnd["failures"], rnd["avoidable_failures"]) == (8, 0, 2, 1)
     for entry, k, n in ((ce["failures_per_100"], 8, 11), (ce["avoidable_failures_per_100"], 5, 11),
@@ -192,7 +192,7 @@ def test_per_sampler_rates_have_wilson_intervals(report):
 
 
 def test_per_scenario_table(report):
-    a, b, c = (report["scenarios"][name] for name in "ABC")
+    a, b, c = (report.to_dict()["scenarios"][name] for name in "ABC")
     assert (a["episodes"], a["failures"], a["avoidable"], a["unknown"], a["clusters"]) == (11, 5, 4, 1, 2)
     assert (b["episodes"], b["errors"], b["failures"], b["unavoidable"], b["clusters"]) == (8, 1, 5, 3, 3)
     assert c["episodes"] == 0 and c["failure_rate"]["value"] is None  # selected but never sampled
@@ -203,7 +203,7 @@ def test_per_scenario_table(report):
 
 
 def test_clusters_carry_their_conversion(report):
-    clusters = {c["id"]: c for c in report["clusters"]}
+    clusters = {c["id"]: c for c in report.to_dict()["clusters"]}
     assert list(clusters) == [A_COLLISION, B_COLLISION, B_STALL, A_TTC]  # most avoidable failures first
     a = clusters[A_COLLISION]
     assert (a["scenario"], a["type"], a["kind"], a["region"], a["size"], a["avoidable"]) == (
@@ -219,19 +219,19 @@ def test_clusters_carry_their_conversion(report):
     assert clusters[A_TTC]["status"] == "merged" and clusters[A_TTC]["merged_into"] == "mined_a_rear_end"
     assert clusters[A_TTC]["unknown"] == 1
     assert clusters[B_STALL]["status"] == "rejected" and clusters[B_STALL]["reason"].startswith("check: compile")
-    [off_road] = report["unavoidable_clusters"]
+    [off_road] = report.to_dict()["unavoidable_clusters"]
     assert (off_road["id"], off_road["size"], off_road["unavoidable"], off_road["status"]) == (
         B_OFF_ROAD, 3, 3, "not converted")
     assert off_road["representative"]["index"] == 17  # all unavoidable, so among all: the lowest rho (-1.17)
 
 
 def test_failures_and_unavoidable_are_listed_apart(report):
-    assert sorted(f["index"] for f in report["failures"]) == [0, 1, 4, 6, 8, 9, 13]
-    assert [f["index"] for f in report["unavoidable"]] == [3, 10, 17]
-    assert all(f["reference"]["failure"]["type"] == "off_road" for f in report["unavoidable"])
-    assert report["errors"] == [{"index": 7, "sampler": "cross-entropy", "scenario": "B", "seed": 1007,
+    assert sorted(f["index"] for f in report.to_dict()["failures"]) == [0, 1, 4, 6, 8, 9, 13]
+    assert [f["index"] for f in report.to_dict()["unavoidable"]] == [3, 10, 17]
+    assert all(f["reference"]["failure"]["type"] == "off_road" for f in report.to_dict()["unavoidable"])
+    assert report.to_dict()["errors"] == [{"index": 7, "sampler": "cross-entropy", "scenario": "B", "seed": 1007,
                                  "error": "worker crashed (exit code -9); restarted"}]
-    assert {(r["cluster"], r["stage"]) for r in report["rejected"]} == {(B_COLLISION, "reproduction"),
+    assert {(r["cluster"], r["stage"]) for r in report.to_dict()["rejected"]} == {(B_COLLISION, "reproduction"),
                                                                         (B_STALL, "check")}
 
 
@@ -256,7 +256,7 @@ def test_report_json_is_strict_schema_json(run_dir, tmp_path):
 def test_markdown_has_the_tables(report):
     text = markdown(report)
     assert "| sampler | episodes | failures | failures per 100 |" in text
-    ce = report["samplers"]["cross-entropy"]["failures_per_100"]
+    ce = report.to_dict()["samplers"]["cross-entropy"]["failures_per_100"]
     assert f"| cross-entropy | 11 | 8 | {ce['value']:.1f} [{ce['low']:.1f}, {ce['high']:.1f}] |" in text
     assert "| `A` | 11 | 5 | 45.5% [" in text
     assert f"| `{A_COLLISION}` | `A` | collision (rear_end, with car) | 4 | 4 |" in text  # how and with whom
@@ -279,8 +279,8 @@ def test_a_run_without_failures_reports_zeros(tmp_path):
     (out / "settings.json").write_text(json.dumps({"policy": "rule", "sampler": "halton", "seed": 0}))
     (out / "episodes.jsonl").write_text(json.dumps(_record(0, "halton", "A", 0.5, None, None, None)) + "\n")
     report = build_report(out)
-    assert report["counts"]["failures"] == 0 and report["counts"]["clusters"] == 0
-    halton = report["samplers"]["halton"]["failures_per_100"]
+    assert report.to_dict()["counts"]["failures"] == 0 and report.to_dict()["counts"]["clusters"] == 0
+    halton = report.to_dict()["samplers"]["halton"]["failures_per_100"]
     assert halton["value"] == 0.0 and halton["high"] == pytest.approx(100 * wilson(0, 1)[1])
     page = write_html(report, out / "report.html").read_text()
     assert "0 failure(s) in 1 episode(s)" in page and "<video" not in page
@@ -432,18 +432,18 @@ def test_the_report_of_a_real_mining_run_matches_its_records(tmp_path):
 
 
 def test_breadth_counts_and_their_text(report):
-    counts = report["counts"]
+    counts = report.to_dict()["counts"]
     assert counts["behaviours"] == counts["clusters"] == 5
     # A: collision, low_ttc; B: off_road, collision, stall
     assert counts["scenario_failure_types"] == 5 and counts["scenarios_failing"] == 2
-    assert report["scenarios"]["A"]["failure_types"] == 2 and report["scenarios"]["B"]["failure_types"] == 3
+    assert report.to_dict()["scenarios"]["A"]["failure_types"] == 2 and report.to_dict()["scenarios"]["B"]["failure_types"] == 3
     line = ("10 failure(s): 5 distinct behaviour(s), 5 (scenario family, failure type) pair(s), 2 scenario "
             "famil(ies) with a failure; by type: collision 5, off road 3, low_ttc 1, stall 1")
     assert line in format_summary(report) and line in markdown(report)
 
 
 def test_the_rate_estimate_needs_every_proposal_density(report):
-    rate = report["failure_rate"]  # the cross-entropy records of this run were written without their densities
+    rate = report.to_dict()["failure_rate"]  # the cross-entropy records of this run were written without their densities
     assert rate["available"] is False and "no proposal density" in rate["reason"]
     assert "not estimated" in format_summary(report)
 
@@ -456,7 +456,7 @@ def test_a_uniform_run_estimates_its_plain_failure_rate(tmp_path):
         record["sampler"] = "random"
     (run / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     report = build_report(run)
-    rate = report["failure_rate"]
+    rate = report.to_dict()["failure_rate"]
     assert rate["available"] is True
     a = rate["scenarios"]["A"]
     assert (a["value"], a["n"], a["ess"]) == (pytest.approx(5 / 11), 11, pytest.approx(11))
@@ -591,7 +591,7 @@ def test_a_run_whose_every_episode_errored_says_so_and_counts_them_as_drawn(tmp_
     records = [_record(i, "random", "A", 0.5, None, None, "Traceback ...\nRuntimeError: boom") for i in range(2)]
     (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     report = build_report(out)
-    assert report["counts"]["errors"] == 2 and report["counts"]["episodes"] == 0
+    assert report.to_dict()["counts"]["errors"] == 2 and report.to_dict()["counts"]["episodes"] == 0
     text = markdown(report)
     assert "WARNING: all 2 episodes ended in an error: the run measured nothing (e.g. RuntimeError: boom)" in text
     assert "1 of 2 scenarios were drawn (2 episode(s)) but every episode of them ended in an error" in text
@@ -619,13 +619,13 @@ def test_one_behaviour_in_two_entries_of_one_family_is_one_behaviour(tmp_path):
                for i, name in enumerate(["mined_a", "replay_a", "mined_a"])]
     (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     report = build_report(out)
-    counts = report["counts"]
+    counts = report.to_dict()["counts"]
     assert counts["failures"] == 3 and counts["behaviours"] == 1
     assert counts["scenario_failure_types"] == 1 and counts["scenarios_failing"] == 1
-    (cluster,) = report["clusters"]
+    (cluster,) = report.to_dict()["clusters"]
     assert cluster["id"].startswith("A/collision:rear_end/") and cluster["family"] == "A"
     assert cluster["scenarios"] == ["mined_a", "replay_a"] and cluster["size"] == 3
-    assert report["scenarios"]["replay_a"]["clusters"] == report["scenarios"]["mined_a"]["clusters"] == 1
+    assert report.to_dict()["scenarios"]["replay_a"]["clusters"] == report.to_dict()["scenarios"]["mined_a"]["clusters"] == 1
     assert "`mined_a`, `replay_a`" in markdown(report)
     without = [{k: v for k, v in r.items() if k != "family"} for r in records]  # no family: not a record of a run
     with pytest.raises(MiningError, match="episode 0 of mined_a records no scenario family"):
@@ -688,7 +688,7 @@ def test_each_kept_replay_entry_lists_the_parameters_its_replay_could_not_narrow
     conversions[1].update(replay_entry="B_replay_1004", replay_not_narrowed={})  # kept although its script was not
     (run_dir / "conversions.jsonl").write_text("".join(json.dumps(c) + "\n" for c in conversions))
     report = build_report(run_dir)
-    clusters = {c["id"]: c for c in report["clusters"]}
+    clusters = {c["id"]: c for c in report.to_dict()["clusters"]}
     assert clusters[A_COLLISION]["replay_entry"] == "A_replay_1000"
     assert clusters[A_COLLISION]["replay_not_narrowed"] == {"weather": why, "lane": "a <choice>"}
     assert clusters[B_COLLISION]["replay_not_narrowed"] == {} and clusters[B_STALL]["replay_entry"] is None

@@ -10,7 +10,7 @@ from pathlib import Path
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.html import _cards, _Videos
 from dv2s_gym.mining.report_record import ClusterEntry
-from dv2s_gym.loop.record import RoundRecord
+from dv2s_gym.loop.record import ErroredEpisodes, MiningSummary, RoundRecord
 from dv2s_gym.loop.report import _entry_clips
 from loop_helpers import written_report
 
@@ -79,13 +79,13 @@ def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
     found = errored_episodes(records)
     kind = ("the worker hung (no result after 60 s); then the worker hung (no result after 60 s) running eval "
             "'keep_lane' on s seed <seed> (2 attempts)")
-    assert found["messages"]["s"] == [{"message": kind, "count": 3, "example": records[0]["error"]},
+    assert found.to_dict()["messages"]["s"] == [{"message": kind, "count": 3, "example": records[0]["error"]},
                                       {"message": "scene not sampled", "count": 1}]
-    assert messages_text(found["messages"], "s") == f"{kind} (3 episodes, e.g. seed 17); scene not sampled (1 episode)"
+    assert messages_text(found.to_dict()["messages"], "s") == f"{kind} (3 episodes, e.g. seed 17); scene not sampled (1 episode)"
     # a step recorded with one message per seed adds up with a new one by kind
     old = {"episodes": 2, "scenarios": {"s": 2},
            "messages": {"s": [{"message": records[1]["error"], "count": 1}, {"message": records[2]["error"], "count": 1}]}}
-    merged = merged_messages([old, found])
+    merged = merged_messages([ErroredEpisodes.from_dict(old), found])
     assert merged["s"][0]["message"] == kind and merged["s"][0]["count"] == 5
     lines = _errored_lines(RoundRecord.from_dict({"round": 1, "steps": {"mine": {"errored": old},
                                                                        "regress": {"errored": {"fine_tuned": found}}}}))
@@ -102,8 +102,8 @@ def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(t
     record = {"scenario": "urban_lead_vehicle_stopped", "seed": 0, "index": 3, "params": {},
               "failure": {"type": "collision"}, "result": {"trajectory_hash": "0" * 16}}
     out = convert_failure(record, run, KEEP_LANE.replace(k=1), bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "input"
-    assert "failures/episode-000003/conversion" in out["reason"] and str(tmp_path) not in out["reason"]
+    assert out.to_dict()["status"] == "rejected" and out.to_dict()["stage"] == "input"
+    assert "failures/episode-000003/conversion" in out.to_dict()["reason"] and str(tmp_path) not in out.to_dict()["reason"]
     (run / "settings.json").mkdir()  # nor read the run's settings
     out = replay_failure_entry(record, run, KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["reason"].startswith("replay: ")
@@ -168,8 +168,8 @@ def test_the_loop_report_lists_an_exact_replays_parameters_left_at_the_parents_d
              "replay_not_narrowed": {}}]
     (tmp_path / "replays.jsonl").write_text("".join(json.dumps(row) + "\n" for row in rows))
     kept = replay_entries(tmp_path)
-    assert kept[0]["not_narrowed"] == {"noise": why} and "not_narrowed" not in kept[1]
-    lines = _mining_lines({"folder": str(tmp_path), "kept": kept}, {})
+    assert kept[0].to_dict()["not_narrowed"] == {"noise": why} and "not_narrowed" not in kept[1].to_dict()
+    lines = _mining_lines(MiningSummary.from_dict({"folder": str(tmp_path), "kept": kept}), {})
     assert (f"  - exact replay replay_p_stall is the failing scene at its own seed only; at another seed these keep "
             f"the parent's draw: noise ({why})" in lines)
     assert not any("replay_q_stall" in line for line in lines)

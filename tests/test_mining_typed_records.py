@@ -17,6 +17,9 @@ The miner runs on its typed settings and tasks: :class:`~dv2s_gym.mining.setting
 too), :class:`~dv2s_gym.mining.tasks.MineTask` per episode (its JSON object only where a pool ships it) and
 :class:`~dv2s_gym.mining.settings.RunOrigin`; ``settings.json`` is written from them and read back only to check a
 resumed run's identity.
+
+A typed record is no mapping (:func:`test_a_typed_record_is_no_mapping`): it is read by its fields, and its JSON object
+is its ``to_dict``.
 """
 
 from __future__ import annotations
@@ -376,7 +379,7 @@ def test_the_mining_report_is_a_typed_record_written_as_report_json():
                                        created="2026-01-01T00:00:00+00:00")
     assert isinstance(report, MineReport) and isinstance(report.counts, MineCounts)
     assert all(isinstance(entry, SamplerSummary) for entry in report.samplers.values())
-    assert report.counts.failures == report["counts"]["failures"] == 0
+    assert report.counts.failures == report.to_dict()["counts"]["failures"] == 0
     saved = json.loads(json.dumps(report.to_dict(), sort_keys=True))  # as report.json holds it
     assert "run_dir" in saved and saved["run_dir"] is None  # every field is written, null included
     again = MineReport.from_dict(saved)
@@ -397,7 +400,7 @@ def test_loop_json_s_settings_and_start_are_typed_records():
                 "env_config": {"duration": 10}, "fine_tune_env_config": {}, "budget": 32, "sampler": "random"}
     record = RecordedLoopSettings.from_dict(settings)
     assert (record.policy, record.workers, record.bank_dir) == ("dv2s-ppo", 2, None)
-    assert record.to_dict() == settings and record["budget"] == 32  # the other settings kept as recorded
+    assert record.to_dict() == settings and record.to_dict()["budget"] == 32  # the other settings kept as recorded
     start = LoopStart.from_dict({"bank": "/b", "scenarios": ["a", "b"]})
     assert start.scenarios == ("a", "b") and start.to_dict() == {"bank": "/b", "scenarios": ["a", "b"]}
     with pytest.raises(RecordError, match="'workers'"):
@@ -467,3 +470,48 @@ def test_the_mining_report_holds_its_clusters_and_failures_as_records():
     assert saved["clusters"][0]["representative"]["with"] == "car1" and saved["clusters"][0]["status"] == "merged"
     assert saved["clusters"][0]["conversion"] == _CONVERSION
     assert json.dumps(MineReport.from_dict(saved).to_dict(), sort_keys=True) == json.dumps(saved, sort_keys=True)
+
+
+def _record_classes() -> List[type]:
+    """Every typed record class of the product (the subclasses of ``JsonRecord``), each product module whose text
+    names ``JsonRecord`` or another ``...Record`` (every module that defines records does) imported first."""
+    import importlib
+
+    for package in ("scenario_bank", "envs", "policies", "dv2s_gym"):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            if "Record" in path.read_text() and path.name != "__main__.py" and "maps" not in path.parts:
+                importlib.import_module(".".join(path.relative_to(ROOT).with_suffix("").parts).replace(".__init__", ""))
+    found, todo = [], [JsonRecord]
+    while todo:
+        for sub in todo.pop().__subclasses__():
+            if sub not in found:
+                found.append(sub)
+                todo.append(sub)
+    return found
+
+
+MAPPING_METHODS = ("__getitem__", "__iter__", "__len__", "__contains__", "keys", "get", "items", "values")
+"""What a record would have if it were read by key like the JSON object it stands for."""
+
+
+def test_a_typed_record_is_no_mapping():
+    """A record is read by its fields; its JSON object is its ``to_dict``. No record class is a ``Mapping`` or has a
+    mapping's methods, so a reader that reads one by key fails at once instead of reading a misspelled key as
+    ``None``."""
+    from collections.abc import Mapping
+
+    from scenario_bank.records import EpisodeRecord, Provenance, recorded
+
+    classes = _record_classes()
+    assert len(classes) > 40 and EpisodeRecord in classes  # every record module was found
+    mappings = [c.__qualname__ for c in classes + [JsonRecord] if issubclass(c, Mapping)]
+    assert not mappings, f"typed records that are mappings: {mappings}"
+    keyed = [f"{c.__qualname__}.{name}" for c in classes + [JsonRecord] for name in MAPPING_METHODS if hasattr(c, name)]
+    assert not keyed, f"typed records read by key: {keyed}"
+    empty = Provenance.from_dict({})
+    assert empty.to_dict() == {} and bool(empty) and not recorded(empty) and not recorded(None)
+    episode = {"index": 0, "scenario": "s", "seed": 1}
+    assert EpisodeRecord.from_dict(episode) == EpisodeRecord.from_dict(dict(episode))
+    assert EpisodeRecord.from_dict(episode) != episode and EpisodeRecord.from_dict(episode).to_dict() == episode
+    with pytest.raises(TypeError):
+        EpisodeRecord.from_dict(episode)["seed"]

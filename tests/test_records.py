@@ -60,8 +60,8 @@ def test_a_mined_provenance_round_trips_with_its_unknown_and_null_fields():
     assert provenance.mined and provenance.failure_type == "collision" and not provenance.is_replay
     assert provenance.files == ("failure.webm", "trace.json.gz") and provenance.merged[0]["seed"] == 9
     assert provenance.extra == {"converted_e2e_sc": 0.5}
-    assert provenance["parent"] == provenance.parent == "highway_lead_vehicle_brakes"  # a read-only mapping too
-    assert provenance == MINED_SOURCE
+    assert provenance.to_dict()["parent"] == provenance.parent == "highway_lead_vehicle_brakes"
+    assert provenance.to_dict() == MINED_SOURCE
 
 
 def test_a_field_left_out_stays_out_and_a_null_one_stays_null():
@@ -146,7 +146,7 @@ def test_a_listed_entry_carries_its_typed_sidecar_and_a_malformed_one_is_a_probl
     listing = scan_entries(tmp_path, {})
     entry = listing.entries["mined_x"]
     assert isinstance(entry.sidecar, Sidecar) and isinstance(entry.source, Provenance)
-    assert entry.source.parent == "highway_lead_vehicle_brakes" and entry.source == MINED_SOURCE
+    assert entry.source.parent == "highway_lead_vehicle_brakes" and entry.source.to_dict() == MINED_SOURCE
     assert entry.sidecar.source is entry.source and entry.sidecar.description == "d"
     assert listing.index["mined_x"]["meta"] == entry.sidecar.to_dict()
     assert list(listing.entries) == ["mined_x"]
@@ -158,11 +158,11 @@ def test_a_listed_entry_carries_its_typed_sidecar_and_a_malformed_one_is_a_probl
 
 def test_an_episode_record_round_trips_and_reads_its_outcome():
     record = EpisodeRecord.from_dict(EPISODE)
-    assert record.to_dict() == EPISODE and record == EPISODE
+    assert record.to_dict() == EPISODE and record == EpisodeRecord.from_dict(EPISODE) and record != EPISODE
     assert record.failure_state == (0.5, 1.0) and "worker_restarts" not in record.to_dict()
     assert record.id == "highway_lead_vehicle_brakes/1234" and record.failed and record.outcome == "failed"
     assert record.failure_type == "collision" and record.mean_speed == 21.5 and record.min_ttc == 0.4
-    assert record["point"] == [0.1, [0.2]] and record.get("missing") is None
+    assert record.to_dict()["point"] == [0.1, [0.2]] and "missing" not in record.to_dict()
     errored = EpisodeRecord.from_dict({**EPISODE, "error": "RuntimeError: x", "result": None})
     assert errored.outcome == "error" and not errored.failed and errored.failure_type is None
     assert math.isinf(errored.min_ttc) and errored.mean_speed is None

@@ -48,19 +48,19 @@ def noisy_run(tmp_path_factory):
 def test_report_has_the_documented_schema(noisy_run):
     out, report = noisy_run
     assert report == json.loads((out / "report.json").read_text())
-    assert report["schema"] == SCHEMA == "dv2s-regress" and report["schema_version"] == SCHEMA_VERSION == 2
+    assert report.to_dict()["schema"] == SCHEMA == "dv2s-regress" and report.to_dict()["schema_version"] == SCHEMA_VERSION == 2
     assert {"created", "dv2s_version", "bank", "settings", "candidate", "baseline", "episodes", "scenarios",
             "overall", "verdict", "regressed", "newly_failing", "errors", "stopped_early"} <= report.keys()
-    assert report["bank"]["scenarios"] == PAIR and len(report["bank"]["version"]) == 64
-    assert {"path", "version", "scenarios"} <= report["bank"].keys()
+    assert report.to_dict()["bank"]["scenarios"] == PAIR and len(report.to_dict()["bank"]["version"]) == 64
+    assert {"path", "version", "scenarios"} <= report.to_dict()["bank"].keys()
     assert {"episodes", "seed", "margin", "alpha", "sequential", "env_config", "backend", "workers"} <= \
-        report["settings"].keys()
-    assert report["settings"]["env_config"] == SHORT
-    assert report["candidate"] == {"spec": NOISY, "card": None}
-    assert report["baseline"]["spec"] == "rule"
-    assert [e["id"] for e in report["episodes"]] == [f"{s}/{k}" for s in PAIR for k in range(4)]
+        report.to_dict()["settings"].keys()
+    assert report.to_dict()["settings"]["env_config"] == SHORT
+    assert report.to_dict()["candidate"] == {"spec": NOISY, "card": None}
+    assert report.to_dict()["baseline"]["spec"] == "rule"
+    assert [e["id"] for e in report.to_dict()["episodes"]] == [f"{s}/{k}" for s in PAIR for k in range(4)]
     for name in PAIR:
-        entry = report["scenarios"][name]
+        entry = report.to_dict()["scenarios"][name]
         assert SUMMARY_KEYS <= entry["candidate"].keys() and SUMMARY_KEYS <= entry["baseline"].keys()
         assert COMPARISON_KEYS <= entry["comparison"].keys()
         for key in ("collision_rate", "failure_rate", "mean_speed"):
@@ -69,16 +69,16 @@ def test_report_has_the_documented_schema(noisy_run):
         table = entry["comparison"]["table"]
         assert sum(table.values()) == 4
         assert set(table) == {"both_fail", "candidate_only", "baseline_only", "neither"}
-    assert SUMMARY_KEYS <= report["overall"]["candidate"].keys()
-    assert report["overall"]["comparison"]["verdict"] == report["verdict"]
-    assert report["verdict"] in ("PASS", "FAIL", "INCONCLUSIVE")
-    assert report["regressed"] == [n for n in PAIR if report["scenarios"][n]["comparison"]["verdict"] == "FAIL"]
+    assert SUMMARY_KEYS <= report.to_dict()["overall"]["candidate"].keys()
+    assert report.to_dict()["overall"]["comparison"]["verdict"] == report.to_dict()["verdict"]
+    assert report.to_dict()["verdict"] in ("PASS", "FAIL", "INCONCLUSIVE")
+    assert report.to_dict()["regressed"] == [n for n in PAIR if report.to_dict()["scenarios"][n]["comparison"]["verdict"] == "FAIL"]
 
 
 @pytest.mark.slow
 def test_paired_episodes_run_identical_scenes(noisy_run):
     _, report = noisy_run
-    for episode in report["episodes"]:
+    for episode in report.to_dict()["episodes"]:
         candidate, baseline = episode["candidate"], episode["baseline"]
         assert candidate["seed"] == baseline["seed"] == episode["seed"]
         assert candidate["scene_seed"] == baseline["scene_seed"]
@@ -88,15 +88,15 @@ def test_paired_episodes_run_identical_scenes(noisy_run):
 @pytest.mark.slow
 def test_newly_failing_and_traces_of_failed_episodes(noisy_run):
     out, report = noisy_run
-    for episode in report["episodes"]:
+    for episode in report.to_dict()["episodes"]:
         for role in ("candidate", "baseline"):
             result = episode[role]
             if result["failed"]:
                 assert result["trace"] and (out / result["trace"]).is_file()
             else:
                 assert result["trace"] is None
-    expected = [e["id"] for e in report["episodes"] if e["candidate"]["failed"] and not e["baseline"]["failed"]]
-    assert report["newly_failing"] == expected and expected  # the noisy copy crashes somewhere in 8 episodes
+    expected = [e["id"] for e in report.to_dict()["episodes"] if e["candidate"]["failed"] and not e["baseline"]["failed"]]
+    assert report.to_dict()["newly_failing"] == expected and expected  # the noisy copy crashes somewhere in 8 episodes
 
 
 @pytest.mark.slow
@@ -106,7 +106,7 @@ def test_the_html_report_shows_newly_failing_pairs_as_clips_and_lists_them_witho
     the page pass ``clips=False``); without clips the page lists the same pairs and says the clips were not
     rendered."""
     out, report = noisy_run
-    shown = min(len(report["newly_failing"]), MAX_VIDEOS)
+    shown = min(len(report.to_dict()["newly_failing"]), MAX_VIDEOS)
     shutil.copytree(out / "traces", tmp_path / "traces")  # the report names its traces relative to its folder
     page = write_reports(report, tmp_path)["html"].read_text()
     assert shown and page.count('class="clip pair"') == shown and page.count("<video") == 2 * shown
@@ -122,13 +122,13 @@ def test_junit_xml_has_one_case_per_scenario_and_the_verdict_and_is_valid(noisy_
     cases = root.findall(".//testcase")
     assert [c.get("name") for c in cases] == PAIR + ["overall verdict"]
     for case in cases[:-1]:
-        verdict = report["scenarios"][case.get("name")]["comparison"]["verdict"]
+        verdict = report.to_dict()["scenarios"][case.get("name")]["comparison"]["verdict"]
         assert (case.find("failure") is not None) == (verdict == "FAIL")
         assert (case.find("skipped") is not None) == (verdict == "INCONCLUSIVE")
-    assert (cases[-1].find("failure") is not None) == (report["verdict"] == "FAIL")
+    assert (cases[-1].find("failure") is not None) == (report.to_dict()["verdict"] == "FAIL")
     suite = root.find("testsuite")
-    assert int(suite.get("failures")) == len(report["regressed"]) + (report["verdict"] == "FAIL")
-    assert float(suite.get("time")) > 0 and suite.get("hostname") == report["hostname"]
+    assert int(suite.get("failures")) == len(report.to_dict()["regressed"]) + (report.to_dict()["verdict"] == "FAIL")
+    assert float(suite.get("time")) > 0 and suite.get("hostname") == report.to_dict()["hostname"]
 
 
 def _junit_of(tables, errors=0, baseline=True):
@@ -170,7 +170,7 @@ def test_junit_a_pooled_only_fail_is_a_failure_of_the_overall_case():
     spread = {f"s{i}": [(True, False)] * 7 + [(False, True)] * 3 + [(True, True)] * 3 + [(False, False)] * 187
               for i in range(5)}
     report, cases, suite = _junit_of(spread)
-    assert report["verdict"] == "FAIL" and report["regressed"] == []
+    assert report.to_dict()["verdict"] == "FAIL" and report.to_dict()["regressed"] == []
     assert cases["overall verdict"].find("failure") is not None
     assert "all scenarios pooled" in cases["overall verdict"].find("failure").get("message")
     assert suite.get("failures") == "1" and all(cases[f"s{i}"].find("skipped") is not None for i in range(5))
@@ -179,28 +179,28 @@ def test_junit_a_pooled_only_fail_is_a_failure_of_the_overall_case():
 def test_junit_error_is_an_error_and_inconclusive_is_skipped_with_its_reason():
     few = {"a": [(False, False)] * 3}
     report, cases, suite = _junit_of(few)
-    assert report["verdict"] == "INCONCLUSIVE"
+    assert report.to_dict()["verdict"] == "INCONCLUSIVE"
     assert cases["overall verdict"].find("skipped").get("message").startswith("INCONCLUSIVE: no scenario fails")
     report, cases, suite = _junit_of(few, errors=1)
-    assert report["verdict"] == "ERROR" and suite.get("errors") == "2"
+    assert report.to_dict()["verdict"] == "ERROR" and suite.get("errors") == "2"
     assert "RuntimeError: boom" in cases["overall verdict"].find("error").text
     assert cases["a"].find("error") is not None and cases["a"].find("skipped") is None
     report, cases, suite = _junit_of(few, errors=1, baseline=False)  # measures only
-    assert report["verdict"] == "ERROR" and cases["overall verdict"].find("error") is not None
+    assert report.to_dict()["verdict"] == "ERROR" and cases["overall verdict"].find("error") is not None
 
 
 def test_markdown_has_the_comparison_table(noisy_run):
     out, report = noisy_run
     text = (out / "report.md").read_text()
-    assert text.startswith(f"## dv2s regress: {report['verdict']}")
+    assert text.startswith(f"## dv2s regress: {report.to_dict()['verdict']}")
     assert "| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |" \
         in text
     for name in PAIR:
         row = next(line for line in text.splitlines() if line.startswith(f"| `{name}` | 4 |"))
-        assert row.endswith(f"| {report['scenarios'][name]['comparison']['verdict']} |")
+        assert row.endswith(f"| {report.to_dict()['scenarios'][name]['comparison']['verdict']} |")
     # a pull-request comment: the verdict first, the tables folded, no absolute path of this machine
     head = text.split("<details>")[0]
-    assert head.splitlines()[2].startswith(f"**{report['verdict']}**") and len(head) < 1500
+    assert head.splitlines()[2].startswith(f"**{report.to_dict()['verdict']}**") and len(head) < 1500
     assert "<summary>Scenarios, worst first</summary>" in text and text.count("<details>") == text.count("</details>")
     assert str(out) not in text and "dv2s replay report.json --episode" in text
 
@@ -230,12 +230,12 @@ def test_markdown_puts_the_regressed_scenarios_first_and_fits_a_comment(tmp_path
 
 def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):
     out, report = noisy_run
-    failed = report["newly_failing"][0]
+    failed = report.to_dict()["newly_failing"][0]
     video = tmp_path / "failed.webm"
     result = replay_episode(out / "report.json", failed, video=video)
     assert result["source"] == "trace" and result["matches"] and video.stat().st_size > 0
     assert replay_episode(out / "report.json", failed, from_policy=True)["matches"]  # the noisy policy too
-    passed = next(e["id"] for e in report["episodes"] if not e["baseline"]["failed"])
+    passed = next(e["id"] for e in report.to_dict()["episodes"] if not e["baseline"]["failed"])
     again = replay_episode(out / "report.json", passed, role="baseline")
     assert again["source"] == "policy" and again["matches"]
     with pytest.raises(RegressError, match="no episode 'nowhere/1'"):
@@ -246,19 +246,19 @@ def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):
 def test_too_few_episodes_is_inconclusive_never_pass(tmp_path):
     report = run_regression("rule", "rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
                             out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)
-    assert report["verdict"] == "INCONCLUSIVE"
-    assert report["scenarios"]["highway_lead_vehicle_brakes"]["comparison"]["verdict"] == "INCONCLUSIVE"
-    assert report["regressed"] == []
+    assert report.to_dict()["verdict"] == "INCONCLUSIVE"
+    assert report.to_dict()["scenarios"]["highway_lead_vehicle_brakes"]["comparison"]["verdict"] == "INCONCLUSIVE"
+    assert report.to_dict()["regressed"] == []
 
 
 @pytest.mark.slow
 def test_without_a_baseline_measures_only(tmp_path):
     report = run_regression("rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
                             out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)
-    assert report["verdict"] is None and report["baseline"] is None
-    entry = report["scenarios"]["highway_lead_vehicle_brakes"]
+    assert report.to_dict()["verdict"] is None and report.to_dict()["baseline"] is None
+    entry = report.to_dict()["scenarios"]["highway_lead_vehicle_brakes"]
     assert entry["baseline"] is None and entry["comparison"] is None and entry["candidate"]["episodes"] == 2
-    assert all(e["baseline"] is None for e in report["episodes"])
+    assert all(e["baseline"] is None for e in report.to_dict()["episodes"])
 
 
 @pytest.mark.slow
@@ -268,7 +268,7 @@ def test_resume_after_an_interruption_loses_and_duplicates_nothing(tmp_path):
     seen = []
 
     def interrupt(result):
-        seen.append((result["id"], result["role"]))
+        seen.append((result.id, result.role))
         if len(seen) == 5:
             raise KeyboardInterrupt
 
@@ -282,11 +282,11 @@ def test_resume_after_an_interruption_loses_and_duplicates_nothing(tmp_path):
     with pytest.raises(ResumeMismatchError, match="episodes: run has 4, asked 5"):
         run_regression("rule", "keep_lane", **{**options, "episodes": 5})
     rerun = []
-    report = run_regression("rule", "keep_lane", on_result=lambda r: rerun.append((r["id"], r["role"])), **options)
+    report = run_regression("rule", "keep_lane", on_result=lambda r: rerun.append((r.id, r.role)), **options)
     assert len(seen) + len(rerun) == 16 and not set(seen) & set(rerun)
     keys = [(r["id"], r["role"]) for r in map(json.loads, (tmp_path / "results.jsonl").read_text().splitlines())]
     assert len(keys) == len(set(keys)) == 16
-    assert len(report["episodes"]) == 8 and not report["errors"]
+    assert len(report.to_dict()["episodes"]) == 8 and not report.to_dict()["errors"]
     again = []
     run_regression("rule", "keep_lane", on_result=again.append, **options)
     assert again == []  # a finished run resumes to the same report without running anything
@@ -327,14 +327,14 @@ def test_a_worker_that_crashes_or_hangs_is_retried_once_then_reported(tmp_path, 
                             out_dir=tmp_path / "out", env_config={"duration": 2}, stall_seconds=1, timeout=timeout,
                             progress=False)
     assert sorted(log.read_text().split()) == ["0", "0", "1", "1"]  # each tried twice
-    errors = {e["id"]: e for e in report["errors"]}
+    errors = {e["id"]: e for e in report.to_dict()["errors"]}
     assert set(errors) == {"highway_lead_vehicle_brakes/0", "highway_lead_vehicle_brakes/1"}
     assert "crashed (exit code 3)" in errors["highway_lead_vehicle_brakes/0"]["error"]
     assert f"hung (no result after {timeout} s)" in errors["highway_lead_vehicle_brakes/1"]["error"]
     assert all(e["role"] == "candidate" and "2 attempts" in e["error"] for e in errors.values())
-    episodes = {e["id"]: e for e in report["episodes"]}
+    episodes = {e["id"]: e for e in report.to_dict()["episodes"]}
     assert len(episodes) == 3 and not episodes["highway_lead_vehicle_brakes/2"]["candidate"].get("error")
-    assert report["scenarios"]["highway_lead_vehicle_brakes"]["candidate"]["errors"] == 2
+    assert report.to_dict()["scenarios"]["highway_lead_vehicle_brakes"]["candidate"]["errors"] == 2
     junit = ET.parse(tmp_path / "out" / "junit.xml").getroot()
     assert junit.find(".//testcase/error") is not None
 
@@ -361,13 +361,13 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     settings = {"episodes": 200, "seed": 0, "margin": 0.05, "alpha": 0.05, "failure": ["collision", "off_road"]}
     clean = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
                          episodes=episodes)
-    assert clean["verdict"] == "PASS"
+    assert clean.to_dict()["verdict"] == "PASS"
     episodes[0] = dict(episodes[0], candidate=by_seed[4])
     broken = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
                           episodes=episodes)
-    assert broken["verdict"] == "ERROR" and "ended in an error" in broken["overall"]["comparison"]["reason"]
-    assert broken["scenarios"]["s"]["comparison"]["verdict"] == "ERROR"
-    assert broken["errors"] == [{"id": "s/0", "role": "candidate", "error": by_seed[4]["error"]}]
+    assert broken.to_dict()["verdict"] == "ERROR" and "ended in an error" in broken.to_dict()["overall"]["comparison"]["reason"]
+    assert broken.to_dict()["scenarios"]["s"]["comparison"]["verdict"] == "ERROR"
+    assert broken.to_dict()["errors"] == [{"id": "s/0", "role": "candidate", "error": by_seed[4]["error"]}]
     # so does a FAIL: an error is never hidden behind another verdict
     failing = [dict(e, candidate=dict(ok, failed=True)) for e in episodes]
     failing[0] = episodes[0]
@@ -376,7 +376,7 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     # and a measures-only run with an error has the verdict ERROR, not none
     alone = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline=None,
                          episodes=[dict(e, baseline=None) for e in episodes])
-    assert alone["verdict"] == "ERROR" and "1 episode ended in an error" in alone["error_reason"]
+    assert alone.to_dict()["verdict"] == "ERROR" and "1 episode ended in an error" in alone.to_dict()["error_reason"]
 
 
 @pytest.mark.slow
@@ -384,14 +384,14 @@ def test_baseline_report_runs_only_the_candidate(noisy_run, tmp_path):
     out, old = noisy_run
     roles = []
     report = run_regression(NOISY, baseline_report=out / "report.json", episodes=4, workers=2, out_dir=tmp_path,
-                            on_result=lambda r: roles.append(r["role"]), progress=False)
+                            on_result=lambda r: roles.append(r.role), progress=False)
     # the old report's candidate (the noisy copy) is the baseline: the same policy on the same episodes
     assert roles == ["candidate"] * 8
-    assert report["baseline"]["spec"] == NOISY and report["baseline"]["report"] == str((out / "report.json").resolve())
-    assert report["settings"]["env_config"] == SHORT and report["settings"]["episodes"] == 4
-    for episode in report["episodes"]:
+    assert report.to_dict()["baseline"]["spec"] == NOISY and report.to_dict()["baseline"]["report"] == str((out / "report.json").resolve())
+    assert report.to_dict()["settings"]["env_config"] == SHORT and report.to_dict()["settings"]["episodes"] == 4
+    for episode in report.to_dict()["episodes"]:
         assert episode["candidate"]["trajectory_hash"] == episode["baseline"]["trajectory_hash"]
-    assert report["verdict"] != "FAIL" and report["newly_failing"] == []
+    assert report.to_dict()["verdict"] != "FAIL" and report.to_dict()["newly_failing"] == []
 
 
 def test_baseline_report_of_another_schema_bank_or_config_is_refused(noisy_run, tmp_path):
@@ -475,21 +475,21 @@ def test_noisy_policies_act_alike_on_the_same_episode_whatever_ran_before():
 def test_sequential_run_stops_as_soon_as_the_verdict_is_settled(tmp_path):
     report = run_regression(NOISY, "rule", scenarios=PAIR, episodes=30, batch=5, sequential=True, workers=2,
                             out_dir=tmp_path, progress=False, clips=False)
-    assert report["verdict"] == "FAIL" and report["stopped_early"]
-    assert report["sequential"]["verdict"] == "FAIL"
-    assert len(report["episodes"]) < 2 * 30 and len(report["episodes"]) % (2 * 5) == 0
-    assert report["sequential"]["episodes"] == len(report["episodes"])
+    assert report.to_dict()["verdict"] == "FAIL" and report.to_dict()["stopped_early"]
+    assert report.to_dict()["sequential"]["verdict"] == "FAIL"
+    assert len(report.to_dict()["episodes"]) < 2 * 30 and len(report.to_dict()["episodes"]) % (2 * 5) == 0
+    assert report.to_dict()["sequential"]["episodes"] == len(report.to_dict()["episodes"])
 
 
 @pytest.mark.slow
 def test_a_policy_against_itself_never_fails_on_the_bank(tmp_path):
     report = run_regression("rule", "rule", scenarios=["tag:highway"], episodes=10, workers=2, out_dir=tmp_path,
                             progress=False)
-    assert report["verdict"] in ("PASS", "INCONCLUSIVE") and report["regressed"] == []
-    assert all(c["comparison"]["verdict"] != "FAIL" for c in report["scenarios"].values())
-    for episode in report["episodes"]:  # identical scenes and a deterministic policy: identical episodes
+    assert report.to_dict()["verdict"] in ("PASS", "INCONCLUSIVE") and report.to_dict()["regressed"] == []
+    assert all(c["comparison"]["verdict"] != "FAIL" for c in report.to_dict()["scenarios"].values())
+    for episode in report.to_dict()["episodes"]:  # identical scenes and a deterministic policy: identical episodes
         assert episode["candidate"]["trajectory_hash"] == episode["baseline"]["trajectory_hash"]
-    assert report["newly_failing"] == [] and len(report["episodes"]) == 10 * len(report["scenarios"])
+    assert report.to_dict()["newly_failing"] == [] and len(report.to_dict()["episodes"]) == 10 * len(report.to_dict()["scenarios"])
 
 
 @pytest.mark.slow
@@ -499,16 +499,16 @@ def test_a_degraded_copy_fails_and_names_the_scenarios_that_regressed(tmp_path):
     # passing behind the slow truck by 15, with no pair the other way), so a regression to name is there
     report = run_regression("rule?action_noise=0.3", "rule", scenarios=["tag:highway"], mde=0.5, workers=2,
                             out_dir=tmp_path, progress=False, clips=False)
-    assert report["settings"]["episodes"] == 24
-    assert report["verdict"] == "FAIL"
-    assert report["regressed"]
-    for name in report["regressed"]:
-        table = report["scenarios"][name]["comparison"]["table"]
+    assert report.to_dict()["settings"]["episodes"] == 24
+    assert report.to_dict()["verdict"] == "FAIL"
+    assert report.to_dict()["regressed"]
+    for name in report.to_dict()["regressed"]:
+        table = report.to_dict()["scenarios"][name]["comparison"]["table"]
         assert table["candidate_only"] > table["baseline_only"]
     # the other way round the degraded copy is the baseline: never a FAIL of the candidate
-    swapped = run_regression("rule", "rule?action_noise=0.3", scenarios=report["regressed"][:1], workers=2,
+    swapped = run_regression("rule", "rule?action_noise=0.3", scenarios=report.to_dict()["regressed"][:1], workers=2,
                              out_dir=tmp_path / "swapped", progress=False, clips=False)
-    assert swapped["verdict"] != "FAIL"
+    assert swapped.to_dict()["verdict"] != "FAIL"
 
 
 @pytest.mark.slow
@@ -520,7 +520,7 @@ def test_a_changed_scenario_script_makes_an_old_report_another_bank_version(tmp_
     shutil.copytree(scenario_path("highway_lead_vehicle_brakes").parent, entry)
     old = run_regression("rule", bank_dir=bank, episodes=1, workers=1, out_dir=tmp_path / "old",
                          env_config={"duration": 2}, stall_seconds=1, progress=False)
-    assert old["bank"]["path"] == str(bank.resolve()) and old["bank"]["scenarios"] == ["highway_lead_vehicle_brakes"]
+    assert old.to_dict()["bank"]["path"] == str(bank.resolve()) and old.to_dict()["bank"]["scenarios"] == ["highway_lead_vehicle_brakes"]
     script = entry / "scenario.scenic"
     script.write_text(script.read_text() + "\n# tuned\n")
     with pytest.raises(ReportMismatchError, match="another bank version .*changed scenario highway_lead_vehicle_brakes"):

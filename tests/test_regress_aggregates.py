@@ -57,10 +57,10 @@ def test_report_carries_the_aggregates_as_context():
     bank = {"path": "x", "version": "v", "scenarios": ["s"], "hashes": {"s": "h"}}
     report = build_report(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
                           candidate={"spec": "new"}, baseline={"spec": "old"}, episodes=episodes)
-    poi = report["aggregates"]["probability_of_improvement"]
+    poi = report.to_dict()["aggregates"]["probability_of_improvement"]
     assert poi["value"] > 0.8 and poi["low"] <= poi["value"] <= poi["high"]
     assert "probability of improvement" in _markdown(report) and "the verdict is the paired failure test" in _markdown(report)
     alone = build_report(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
                          candidate={"spec": "new"}, baseline=None, episodes=[dict(e, baseline=None) for e in episodes])
-    assert alone["aggregates"] is None and return_aggregates([PairedEpisode.from_dict(dict(e, baseline=None))
+    assert alone.aggregates is None and return_aggregates([PairedEpisode.from_dict(dict(e, baseline=None))
                                                                   for e in episodes]) is None

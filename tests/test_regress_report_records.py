@@ -71,17 +71,17 @@ def test_the_parts_are_records_read_by_attribute_as_the_consumers_do():
     entry = report.scenario("highway_lead_vehicle_brakes")
     assert isinstance(entry, ScenarioResult) and isinstance(entry.candidate, Summary)
     assert isinstance(entry.comparison, PairedComparison) and entry.verdict == entry.comparison.verdict == "ERROR"
-    assert entry.candidate.failure_rate == entry.candidate["failure_rate"] == entry.candidate.rates["failure_rate"]
-    assert entry.candidate.episode_return == entry.candidate["return"]  # "return" is a keyword: its attribute
+    assert entry.candidate.failure_rate == entry.candidate.to_dict()["failure_rate"] == entry.candidate.rates["failure_rate"]
+    assert entry.candidate.episode_return == entry.candidate.to_dict()["return"]  # "return" is a keyword: its attribute
     assert entry.candidate.rate("stall")["count"] == 1  # the stalled episode of the data
     assert report.errors and all(isinstance(e, EpisodeError) for e in report.errors)
     error = report.errors[0]
     assert error.role == "candidate" and error.first_line.startswith("RuntimeError") and error.scenario in report.scenarios
     assert report.verdict == "ERROR" and report.overall.comparison.reason.startswith("1 episode ended in an error")
     assert report.episode(error.id).errored("candidate") and not report.episode(error.id).errored("baseline")
-    # the record is also the report's JSON object, read-only
-    assert report["scenarios"]["highway_lead_vehicle_brakes"]["comparison"]["verdict"] == "ERROR"
-    assert dict(report)["errors"] == [{"id": error.id, "role": "candidate", "error": error.error}]
+    # the report's JSON object
+    assert report.to_dict()["scenarios"]["highway_lead_vehicle_brakes"]["comparison"]["verdict"] == "ERROR"
+    assert report.to_dict()["errors"] == [{"id": error.id, "role": "candidate", "error": error.error}]
     with pytest.raises(TypeError):
         report["verdict"] = "PASS"  # noqa - a frozen record
 
@@ -129,8 +129,8 @@ def test_the_consumers_read_a_record_and_its_json_alike():
     assert loop._regress_summary(report, Path("r.json"), ["urban_pull_back_in"]) == \
         loop._regress_summary(as_json, Path("r.json"), ["urban_pull_back_in"])
     summary = loop._regress_summary(report, Path("r.json"), ["urban_pull_back_in"])
-    assert summary["verdict"] == "ERROR" and summary["regressed"] == list(report.regressed)
-    assert summary["new_failure_rate"] == report.overall.candidate.failure_rate
+    assert summary.to_dict()["verdict"] == "ERROR" and summary.to_dict()["regressed"] == list(report.regressed)
+    assert summary.to_dict()["new_failure_rate"] == report.overall.candidate.failure_rate
     roles = {"baseline": "start", "candidate": "fine_tuned"}
     assert loop._regress_errored(report, roles) == loop._regress_errored(as_json, roles)
 

@@ -49,4 +49,4 @@ def test_the_regression_worker_counts_total_standing_time(monkeypatch):
     data = run_regress_task({"kind": "regress", "policy": "rule", "role": "candidate", "scenario": "s", "seed": 0,
                              "env_config": {}, "bank_dir": None, "trace_dir": None,
                              "monitor": MonitorSettings(stall_seconds=5.0)})
-    assert data["stalled"] and data["failed"] and data["failure_kinds"] == ["stall"]
+    assert data.to_dict()["stalled"] and data.to_dict()["failed"] and data.to_dict()["failure_kinds"] == ["stall"]

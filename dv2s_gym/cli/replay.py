@@ -66,9 +66,9 @@ def _replay_mined(args: argparse.Namespace, folder) -> int:
     from dv2s_gym.mining.episode_replay import replay_mined_episode
 
     record, policy = replay_mined_episode(folder, args.episode, policy=args.policy_spec, video=args.video)
-    failure = record.get("failure") or {}
-    print(f"episode {record['index']} ({record['scenario']}, seed {record['seed']}): {policy} re-run "
-          f"with the recorded parameters; trajectory hash {record['result']['trajectory_hash'][:16]} matches the record"
+    failure = record.failure or {}
+    print(f"episode {record.index} ({record.scenario}, seed {record.seed}): {policy} re-run "
+          f"with the recorded parameters; trajectory hash {record.result['trajectory_hash'][:16]} matches the record"
           + (f"; failure {failure.get('kind')} at {failure.get('time')} s" if failure else "")
           + (f"; video {args.video}" if args.video else ""))
     return 0

@@ -8,11 +8,12 @@ reports, each scenario with its distinct error messages and how many episodes en
 from __future__ import annotations
 
 import re
-from typing import Any, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.loop.record import ErroredEpisodes
+from scenario_bank.records import EpisodeRecord, HeldOutEpisode, RegressEpisode
 
-__all__ = ["ERROR_MESSAGES_KEPT", "error_message", "message_kind", "errored_episodes", "merged_messages",
+__all__ = ["ERROR_MESSAGES_KEPT", "EpisodeRecords", "error_message", "message_kind", "errored_episodes", "merged_messages",
            "messages_text"]
 
 ERROR_MESSAGES_KEPT = 5
@@ -37,8 +38,21 @@ def message_kind(message: str) -> str:
     return _SEED.sub(SEED_MARK, str(message))
 
 
-def errored_episodes(records: Sequence[Mapping[str, Any]]) -> ErroredEpisodes:
-    """The episodes of ``records`` that errored (an ``error`` set: a scene that could not be sampled, a crashed or
+EpisodeRecords = Sequence[Union[EpisodeRecord, HeldOutEpisode, RegressEpisode, Mapping[str, Any]]]
+"""Episode records (of a mining run, a held-out evaluation or a regression run), or their JSON objects as the
+run's files hold them (``episodes.jsonl`` rows)."""
+
+
+def _scenario_error(record: Union[EpisodeRecord, HeldOutEpisode, RegressEpisode, Mapping[str, Any]]
+                    ) -> Tuple[Any, Any]:
+    """The scenario and the error of an episode record or of its JSON object."""
+    if isinstance(record, Mapping):
+        return record.get("scenario"), record.get("error")
+    return record.scenario, record.error
+
+
+def errored_episodes(records: EpisodeRecords) -> ErroredEpisodes:
+    """The episodes of ``records`` (:data:`EpisodeRecords`) that errored (an ``error`` set: a scene that could not be sampled, a crashed or
     hung worker...), which no rate counts, as an :class:`~dv2s_gym.loop.record.ErroredEpisodes` (its JSON
     object: ``{"episodes": n, "scenarios": {scenario: n}, "messages": {scenario: [{"message", "count"[,
     "example"]}]}, "examples": {scenario: its first error}}``). ``messages`` holds every
@@ -51,10 +65,10 @@ def errored_episodes(records: Sequence[Mapping[str, Any]]) -> ErroredEpisodes:
     examples: Dict[str, Dict[str, str]] = {}
     firsts: Dict[str, str] = {}
     for record in records:
-        error = record.get("error")
+        scenario, error = _scenario_error(record)
         if not error:
             continue
-        name = str(record.get("scenario"))
+        name = str(scenario)
         scenarios[name] = scenarios.get(name, 0) + 1
         found = counts.setdefault(name, {})
         message = error_message(error)

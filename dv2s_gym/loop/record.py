@@ -25,7 +25,7 @@ from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 from policies.card_record import FineTuneMethod
 from policies.stats import Rate
-from scenario_bank.records import JsonRecord
+from scenario_bank.records import JsonRecord, recorded
 
 __all__ = ["ErroredEpisodes", "LoopStart", "RecordedLoopSettings", "PairedTable", "PairedSummary",
            "FamilyHarmRow", "FamilyHarm", "HeldOutWorse", "HeldOutTests", "FinalVsStart",
@@ -36,12 +36,6 @@ __all__ = ["ErroredEpisodes", "LoopStart", "RecordedLoopSettings", "PairedTable"
 STEPS = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 """The steps of a round, in the order they run (a round that kept no mined scenario has ``skipped`` after
 ``split`` instead of the rest)."""
-
-
-def recorded(record: Optional[JsonRecord]) -> bool:
-    """Whether ``record`` (a step's record or a part of one) holds anything: ``None`` and a record whose JSON object
-    is empty (a step recorded as ``{}``) hold nothing."""
-    return record is not None and bool(record.to_dict())
 
 
 @dataclass(frozen=True, eq=False)

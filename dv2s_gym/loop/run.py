@@ -69,7 +69,7 @@ import os
 import re
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
 
 from dv2s_gym.mining import miner
 
@@ -422,7 +422,7 @@ def _mining_summary(mine_out: Path) -> MiningSummary:
                          clusters_reference_failed=reference_failed)
 
 
-def _regress_errored(report: Mapping[str, Any], roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
+def _regress_errored(report: Union[RegressReport, Mapping[str, Any]], roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
     """The errored episodes of a ``dv2s regress`` report (a :class:`~dv2s_gym.regress.records.RegressReport`) per
     policy: ``roles`` maps its roles (``candidate``, ``baseline``) to the loop's names for them
     (:func:`errored_episodes`' form)."""
@@ -460,7 +460,7 @@ def _policy_env_config(spec: str) -> Dict[str, Any]:
     return dict(card.env_config or {})
 
 
-def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[str] = ()) -> RegressSummary:
+def _regress_summary(report: Union[RegressReport, Mapping[str, Any]], path: Path, parents: Sequence[str] = ()) -> RegressSummary:
     """The regression step's record; ``parents``: scenarios whose own results are kept apart (the held-out
     families' parents, never fine-tuned on: the regression test's view beyond the fine-tuning mix)."""
     report = RegressReport.from_json(report)
@@ -613,7 +613,7 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
     if recorded(steps) and record.policy not in (None, current):
         raise LoopError(f"round {number} in {loop.out / 'loop.json'} was begun from {record.policy}, not from "
                         f"{current}, the policy the rounds before it recommend; choose another --out")
-    if "policy" not in record:
+    if record.policy is None and "policy" not in (record.null_fields or ()):
         loop.state.update(record.replace(policy=current), save=False)
     round_dir = loop.out / f"round_{number}"
     if steps.done("regress") or steps.skipped:
@@ -1062,7 +1062,8 @@ def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, l
     # a resumed run says so itself ("DAgger: resumed from ...", after the step's own line naming the arm)
     path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate,
                                                                              beta_decay=arm.beta_decay), log=arm.log)
-    dagger = read_model_card(path).fine_tune or FineTune()
+    dagger = read_model_card(path).fine_tune
+    dagger = dagger if recorded(dagger) else FineTune()
     return FineTuneArm(model=str(path.resolve()), method=FineTuneMethod.DAGGER.value, reward_weights=None,
                        env_config=arm.env_config, reference=dagger.reference, agreement=dagger.agreement,
                        resumed=tuple(dagger.resumed or ()))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Mapping
+from typing import Any, Dict, List, Mapping, Union
 
 from scenario_bank.records import JsonRecord
 
@@ -26,7 +26,7 @@ class JsonlAppender:
                     handle.truncate(data.rfind(b"\n") + 1)
         self._handle = open(path, "ab")
 
-    def append(self, record: Mapping[str, Any]) -> None:
+    def append(self, record: Union[JsonRecord, Mapping[str, Any]]) -> None:
         """Write ``record`` (a JSON object, or a typed record: :class:`~scenario_bank.records.JsonRecord`) as one
         line."""
         record = record.to_dict() if isinstance(record, JsonRecord) else record

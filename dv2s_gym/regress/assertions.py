@@ -15,6 +15,7 @@ from typing import Any, Dict, Iterator, List, Mapping, Optional, Union
 
 from dv2s_gym.regress.records import RegressReport, ScenarioResult
 from scenario_bank.errors import DV2SError
+from scenario_bank.records import recorded
 
 __all__ = ["RegressionReport", "RegressionFailed"]
 
@@ -49,8 +50,9 @@ class RegressionReport(Mapping[str, Any]):
         out_dir: the run's folder (``report.json``, ``report.md``, ``report.html``, traces).
     """
 
-    def __init__(self, data: Mapping[str, Any], out_dir: Union[str, os.PathLike, None] = None) -> None:
-        self.data: Dict[str, Any] = dict(data)
+    def __init__(self, data: Union[RegressReport, Mapping[str, Any]],
+                 out_dir: Union[str, os.PathLike, None] = None) -> None:
+        self.data: Dict[str, Any] = data.to_dict() if isinstance(data, RegressReport) else dict(data)
         self.report = RegressReport.from_json(data)
         self.out_dir = None if out_dir is None else Path(out_dir)
 
@@ -100,8 +102,8 @@ class RegressionReport(Mapping[str, Any]):
         if verdict == "PASS" or (verdict == "INCONCLUSIVE" and allow_inconclusive):
             return None
         report = self.report
-        candidate = report.candidate.spec if report.candidate is not None and "spec" in report.candidate else "?"
-        baseline = report.baseline.spec if report.baseline else None
+        candidate = report.candidate.spec if report.candidate is not None and "spec" in report.candidate.to_dict() else "?"
+        baseline = report.baseline.spec if report.baseline is not None else None
         where = f"report: {self.path}" if self.path is not None else ""
         if verdict is None:
             return f"dv2s regression: {candidate!r} was run without a baseline, so there is no verdict; {where}"
@@ -122,7 +124,7 @@ class RegressionReport(Mapping[str, Any]):
             label = "regressed on" if self.regressed else "failing more often (pooled FAIL) on"
             lines[0] += f" {label} {', '.join(named) if named else 'the pooled scenarios'}"
             for name in named:
-                lines.append("  " + self._scenario_line(name, scenarios.get(name) or ScenarioResult()))
+                lines.append("  " + self._scenario_line(name, _or_empty(scenarios.get(name))))
         overall = report.overall.comparison if report.overall is not None else None
         if overall is not None and overall.reason:
             lines.append(f"  overall: {overall.reason}")
@@ -165,3 +167,8 @@ class RegressionReport(Mapping[str, Any]):
 
     def __repr__(self) -> str:
         return f"RegressionReport(verdict={self.verdict!r}, regressed={self.regressed!r}, out_dir={str(self.out_dir)!r})"
+
+
+def _or_empty(entry: Optional[ScenarioResult]) -> ScenarioResult:
+    """``entry``, or an empty scenario result when there is none or it holds nothing."""
+    return entry if recorded(entry) else ScenarioResult()

@@ -21,7 +21,7 @@ from envs.trace_bounds import check_file_config, TraceConfigError
 from envs.recording import VideoWriter
 from dv2s_gym.regress.records import BankInfo, RegressReport
 from dv2s_gym.regress.replay import bank_for_scenario
-from scenario_bank.records import RegressEpisode
+from scenario_bank.records import RegressEpisode, recorded
 from policies.evaluation import make_eval_env, run_episode
 from policies.registry import load_policy, PolicyError, spec_from_file
 
@@ -110,7 +110,7 @@ def render_policy_video(report: RegressReport, result: RegressEpisode, role: str
         config = check_file_config(report.settings.env_config if report.settings is not None else None, "the report")
     except TraceConfigError as error:
         raise ClipError(str(error)) from None
-    env = make_eval_env(None, config=config, bank_dir=bank_for_scenario(report.bank or BankInfo(), scenario),
+    env = make_eval_env(None, config=config, bank_dir=bank_for_scenario(report.bank if recorded(report.bank) else BankInfo(), scenario),
                         render_mode="rgb_array")
     frames: List[np.ndarray] = []
     try:

@@ -43,7 +43,7 @@ from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH,
                                   x_scale as _x_scale)
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.failure_types import FAILURE_TABLE
-from scenario_bank.records import RegressEpisode
+from scenario_bank.records import RegressEpisode, recorded
 
 __all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
 
@@ -229,8 +229,8 @@ def _banner(report: RegressReport) -> str:
 
 
 def _settings_table(report: RegressReport) -> str:
-    settings = report.settings or ReportSettings()
-    bank = report.bank or BankInfo()
+    settings = report.settings if recorded(report.settings) else ReportSettings()
+    bank = report.bank if recorded(report.bank) else BankInfo()
     written = settings.to_dict()  # the settings the run recorded (a null one included)
     rows = [("candidate", report.candidate.spec if report.candidate is not None else None),
             ("baseline", report.baseline.spec if report.baseline is not None else "none")]
@@ -250,13 +250,13 @@ def _scenario_table(report: RegressReport) -> str:
                  "p", "p (adjusted)", "verdict", "reason"]
     out = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + "</tr>"]
     for name, entry, overall in _scenario_rows(report):
-        candidate = entry.candidate or Summary()
+        candidate = entry.candidate if recorded(entry.candidate) else Summary()
         cells = [f"<td>{'<b>' if overall else ''}{_e(name)}{'</b>' if overall else ''}</td>",
                  f'<td class="num">{_e(candidate.episodes)}</td>',
                  f'<td class="num">{_e(_interval(candidate.failure_rate))}</td>']
         if has_baseline:
-            baseline = entry.baseline or Summary()
-            comparison = entry.comparison or PairedComparison()
+            baseline = entry.baseline if recorded(entry.baseline) else Summary()
+            comparison = entry.comparison if recorded(entry.comparison) else PairedComparison()
             table = comparison.table or {}
             counts = " / ".join(str(table.get(k, "–")) for k in ("both_fail", "candidate_only", "baseline_only",
                                                                   "neither"))
@@ -375,7 +375,8 @@ def _clips(report: RegressReport, base: Path, videos: Optional[Mapping[str, Vide
                 if shown >= max_videos:
                     left.append(episode_id)
                     continue
-                episode = episodes.get(episode_id) or PairedEpisode()
+                episode = episodes.get(episode_id)
+                episode = episode if recorded(episode) else PairedEpisode()
                 end_step, window = _pair_window(report, episode)
                 sides = []
                 for role in ("candidate", "baseline"):

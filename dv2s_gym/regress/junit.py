@@ -18,6 +18,7 @@ from typing import Any, Mapping, Optional, Union
 from dv2s_gym.regress.records import RegressReport, ScenarioResult
 from dv2s_gym.regress.report import failures_text, headline, power_lines, warnings
 from scenario_bank.atomic import atomic_write_text
+from scenario_bank.records import recorded
 
 __all__ = ["write_junit", "junit_tree"]
 
@@ -61,8 +62,8 @@ def _scenario_case(report: RegressReport, name: str, entry: ScenarioResult) -> E
     """The test case of one scenario: its verdict, its newly failing episodes and errors."""
     comparison = entry.comparison
     errors = [e for e in report.errors or () if e.scenario == name]
-    verdict = comparison.verdict if comparison else ("ERROR" if errors else None)
-    reason = comparison.reason if comparison else (f"{len(errors)} episode(s) ended in an error" if errors
+    verdict = comparison.verdict if recorded(comparison) else ("ERROR" if errors else None)
+    reason = comparison.reason if recorded(comparison) else (f"{len(errors)} episode(s) ended in an error" if errors
                                                    else "measures only")
     failing = [i for i in report.newly_failing or () if i.rsplit("/", 1)[0] == name]
     detail = reason
@@ -79,7 +80,7 @@ def _overall_case(report: RegressReport) -> ET.Element:
     """The test case of the overall verdict."""
     verdict = report.verdict
     comparison = report.overall.comparison if report.overall is not None else None
-    reason = report.error_reason or (comparison.reason if comparison else None) or \
+    reason = report.error_reason or (comparison.reason if recorded(comparison) else None) or \
         "measures only: no baseline, no verdict"
     detail = reason
     if report.regressed:

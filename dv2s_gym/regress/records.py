@@ -16,7 +16,7 @@ renderings, the pytest plugin and the loop's regression step read its parts by a
 Each is a :class:`~scenario_bank.records.JsonRecord`: :meth:`from_json` (``from_dict``) reads the JSON object,
 checking the kind of every field it knows (a :class:`~scenario_bank.records.RecordError` names a bad one),
 :meth:`to_json` (``to_dict``) gives back exactly the JSON object: the same keys in the same order, ``null`` where
-the report writes one, unknown keys kept. A record is also a read-only mapping over that object. The statistics'
+the report writes one, unknown keys kept. A record is read by its fields, not by key. The statistics'
 leaves (the ``{"value", "low", "high"}`` intervals, the paired ``table``, ``power`` and ``aggregates``, made by
 :mod:`~dv2s_gym.regress.power` and :mod:`~dv2s_gym.regress.aggregates` with their own documented shapes) stay JSON
 objects.
@@ -25,7 +25,7 @@ objects.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
+from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple, Union
 
 from policies.card_record import ModelCard
 from scenario_bank.records import JsonRecord, RecordError, RegressEpisode
@@ -45,7 +45,7 @@ class ReportRecord(JsonRecord):
         return self.to_dict()
 
     @classmethod
-    def from_json(cls, data: Mapping[str, Any]):
+    def from_json(cls, data: Union[JsonRecord, Mapping[str, Any]]):
         """The record of a JSON object of ``report.json`` (or the record itself)."""
         return cls.from_dict(data)
 
@@ -214,10 +214,11 @@ class Summary(ReportRecord):
     _WHAT: ClassVar[str] = "summary"
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "Summary":
+    def from_dict(cls, data: Union[JsonRecord, Mapping[str, Any]]) -> "Summary":
         record = super().from_dict(data)
         if record is data:
             return record
+        data = data.to_dict() if isinstance(data, JsonRecord) else data
         rates = {key: value for key, value in data.items() if key.endswith("_rate") and key not in cls._KINDS}
         for key, value in rates.items():
             if not isinstance(value, Mapping):

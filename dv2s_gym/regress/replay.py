@@ -17,7 +17,7 @@ import difflib
 
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.records import BankInfo, RegressReport
-from scenario_bank.records import RegressEpisode
+from scenario_bank.records import RegressEpisode, recorded
 from dv2s_gym.regress.report import bank_info, load_report
 from envs.recording import VideoWriter
 from envs.trace import EpisodeTrace
@@ -109,7 +109,7 @@ def _from_trace(path: str, frames: Optional[List[Any]]):
 
 def _from_policy(report: RegressReport, result: RegressEpisode, spec: str, frames: Optional[List[Any]]):
     config = check_file_config(report.settings.env_config if report.settings else None, "the report")
-    bank = report.bank or BankInfo()
+    bank = report.bank if recorded(report.bank) else BankInfo()
     scenario = result.scenario
     bank_dir = bank_for_scenario(bank, scenario)
     env = make_eval_env(None, config=config, bank_dir=bank_dir,

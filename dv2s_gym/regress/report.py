@@ -103,7 +103,7 @@ from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, 
 from dv2s_gym.regress.store import describe_differences
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
-from scenario_bank.records import RecordError, RegressEpisode
+from scenario_bank.records import RecordError, RegressEpisode, recorded
 
 __all__ = [
     "SCHEMA",
@@ -272,9 +272,10 @@ def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLik
                     scenarios=tuple(scenarios), hashes=hashes)
 
 
-def build_report(*, bank: Mapping[str, Any], settings: Mapping[str, Any], candidate: Mapping[str, Any],
-                 baseline: Optional[Mapping[str, Any]], episodes: Sequence[Mapping[str, Any]],
-                 stopped_early: bool = False, sequential: Optional[Mapping[str, Any]] = None) -> RegressReport:
+def build_report(*, bank: Union[BankInfo, Mapping[str, Any]], settings: Union[ReportSettings, Mapping[str, Any]],
+                 candidate: Union[PolicyInfo, Mapping[str, Any]], baseline: Union[None, PolicyInfo, Mapping[str, Any]],
+                 episodes: Sequence[Union[PairedEpisode, Mapping[str, Any]]], stopped_early: bool = False,
+                 sequential: Union[None, SequentialOutcome, Mapping[str, Any]] = None) -> RegressReport:
     """The report (schema in the module docstring) from the paired episodes.
 
     Args:
@@ -473,11 +474,11 @@ def _pp(entry: Mapping[str, Any]) -> str:
     return (f"{100 * entry['value']:+.1f} pp [{100 * entry['low']:+.1f}, {100 * entry['high']:+.1f}]")
 
 
-def failures_text(summary: Optional[Mapping[str, Any]]) -> str:
-    """A policy's failures in a report's summary as ``count/episodes (percent)`` (``-`` without a summary)."""
-    if not summary:
+def failures_text(summary: Optional[Summary]) -> str:
+    """A policy's failures in a report's summary as ``count/episodes (percent)`` (``-`` without a summary, or with
+    an empty one)."""
+    if not recorded(summary):
         return "-"
-    summary = Summary.from_dict(summary)
     rate = summary.failure_rate
     return f"{rate['count']}/{summary.episodes} ({_pct(rate['value'])})"
 
@@ -512,12 +513,12 @@ def scenarios_by_severity(report: RegressReport) -> List[str]:
     def key(name: str) -> tuple:
         entry = report.scenario(name)
         comparison = entry.comparison
-        errors = ((entry.candidate.errors or 0) if entry.candidate else 0) + (
-            (entry.baseline.errors or 0) if entry.baseline else 0)
-        verdict = (comparison.verdict if comparison else None) or ("ERROR" if errors else None)
-        rise = ((comparison.difference if comparison else None) or {}).get("value")
+        errors = ((entry.candidate.errors or 0) if recorded(entry.candidate) else 0) + (
+            (entry.baseline.errors or 0) if recorded(entry.baseline) else 0)
+        verdict = (comparison.verdict if recorded(comparison) else None) or ("ERROR" if errors else None)
+        rise = ((comparison.difference if recorded(comparison) else None) or {}).get("value")
         if rise is None:
-            rise = ((entry.candidate.failure_rate if entry.candidate else None) or {}).get("value") or 0.0
+            rise = ((entry.candidate.failure_rate if recorded(entry.candidate) else None) or {}).get("value") or 0.0
         return SEVERITY.get(verdict, 4), -float(rise), name
 
     return sorted(report.scenarios, key=key)
@@ -574,9 +575,9 @@ def format_summary(report: RegressReport) -> str:
         comparison = entry.comparison
         rows.append((name, str(entry.candidate.episodes), failures_text(entry.candidate),
                      failures_text(entry.baseline),
-                     _pp(comparison.difference) if comparison else "-",
-                     f"{comparison.p_adjusted:.3g}" if comparison else "-",
-                     comparison.verdict if comparison else "-"))
+                     _pp(comparison.difference) if recorded(comparison) else "-",
+                     f"{comparison.p_adjusted:.3g}" if recorded(comparison) else "-",
+                     comparison.verdict if recorded(comparison) else "-"))
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     lines = [headline(report)]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
@@ -686,7 +687,7 @@ def _markdown_measures(report: RegressReport, order: Sequence[str]) -> List[str]
     for name, entry in _rows(report, order, "**overall**"):
         for role in ("candidate", "baseline"):
             s = entry.summary(role)
-            if not s:
+            if not recorded(s):
                 continue
             label = name if name.startswith("**") else f"`{name}`"
             measures.append(f"| {label} | {role} | {s.episodes} | {_interval(s.rate('collision'))} | "

@@ -31,6 +31,7 @@ from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.tasks import (TaskFunction, function_for, gave_up_result, run_task, start_plugins,
                                     task_modules, worker_plugins)
 import policies.evaluation
+from scenario_bank.records import JsonRecord
 
 __all__ = ["Backend", "LocalBackend", "default_workers", "DEFAULT_TIMEOUT"]
 
@@ -298,7 +299,8 @@ class LocalBackend(Backend):
                 raise WorkerError(message[1])  # every worker would fail alike: the run stops, naming the module
             _, result = message
             if worker.busy[0] in failures:  # finished on a retry: say what happened before
-                result = dict(result, worker_restarts=list(failures[worker.busy[0]]))
+                plain = result.to_dict() if isinstance(result, JsonRecord) else result
+                result = dict(plain, worker_restarts=list(failures[worker.busy[0]]))
             worker.busy = None
             return None, result
         if worker.process.sentinel in ready:

@@ -21,14 +21,14 @@ import numpy as np
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.conversion.failure_video import VideoSettings
-from dv2s_gym.mining.conversion.interaction import key_actor, trace_shows_interaction
+from dv2s_gym.mining.conversion.interaction import FailureInteraction, key_actor, trace_shows_interaction
 from dv2s_gym.mining.monitors import detect_failure, MonitorSettings
 from dv2s_gym.mining.settings import read_run_settings
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline.semantics.trace import trace_actor_kind
 from policies.evaluation import run_episode
 from policies.registry import load_policy
-from scenario_bank.records import EpisodeRecord
+from scenario_bank.records import EpisodeRecord, recorded
 
 __all__ = ["same_failure_class", "reference_failed", "reference_passed", "reference_outcome", "reproduction_seeds",
            "detected_failure", "monitor_options", "policy_name", "video_settings", "reproduce", "clip_episode",
@@ -129,7 +129,8 @@ def video_settings(settings: ConversionSettings) -> VideoSettings:
 
 
 def reproduce(script_path: Path, policy: Any, settings: ConversionSettings, record_seed: int,
-              source_failure: Mapping[str, Any], interaction: Optional[Mapping[str, Any]] = None
+              source_failure: Mapping[str, Any],
+              interaction: Union[FailureInteraction, Mapping[str, Any], None] = None
               ) -> Tuple[List[Dict[str, Any]], List[Any]]:
     """Run ``policy`` on the new scenario over the settings' ``k`` seeds derived from ``record_seed`` (with the
     settings' ``env_config`` and ``monitor``); per episode its seed, failure, the kind of
@@ -138,6 +139,7 @@ def reproduce(script_path: Path, policy: Any, settings: ConversionSettings, reco
     the same kind of actor."""
     from envs.dv2s_env import DV2SEnv
 
+    interaction = FailureInteraction.from_dict(interaction) if interaction is not None else None
     env = DV2SEnv(scenario=str(script_path), config=dict(settings.env_config or {}))
     try:
         bound = load_policy(policy)
@@ -156,7 +158,7 @@ def reproduce(script_path: Path, policy: Any, settings: ConversionSettings, reco
 
 def _reproduction_episode(scene_seed: int, result: Any, trace: Any,
                           monitor: Union[MonitorSettings, Mapping[str, Any], None],
-                          source_failure: Mapping[str, Any], interaction: Optional[Mapping[str, Any]]
+                          source_failure: Mapping[str, Any], interaction: Optional[FailureInteraction]
                           ) -> Dict[str, Any]:
     """One episode of :func:`reproduce`, judged."""
     failure = detected_failure(result, trace, monitor)
@@ -165,9 +167,9 @@ def _reproduction_episode(scene_seed: int, result: Any, trace: Any,
     if actor is not None:
         actor_kind = (failure.get("with_kind") if failure.get("with") == actor and failure.get("with_kind")
                       else trace_actor_kind(trace, actor))
-    wanted_kind = (interaction or {}).get("kind")
+    wanted_kind = interaction.kind if interaction is not None else None
     same = same_failure_class(source_failure, failure) and (wanted_kind is None or actor_kind == wanted_kind)
-    shown = trace_shows_interaction(interaction, trace) if interaction else None
+    shown = trace_shows_interaction(interaction, trace) if recorded(interaction) else None
     return {"seed": scene_seed, "failure": failure, "steps": result.steps, "trajectory_hash": result.trajectory_hash,
             "actor_kind": actor_kind, "interaction": shown, "reproduced": same}
 

@@ -47,6 +47,7 @@ from envs.safety_metrics import path_is_free
 from envs.trace import EpisodeTrace, TraceMismatchError
 from policies.evaluation import run_episode, make_eval_env
 from policies.registry import load_policy
+from scenario_bank.records import EpisodeRecord, RecordError
 
 __all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "VideoSettings", "clip_camera", "failure_step",
            "record_failure_video", "rerun_failure", "stall_end", "write_failure_video", "write_script_episode_video"]
@@ -167,13 +168,26 @@ def _trace_failure(trace) -> Optional[Dict[str, Any]]:
     return None if event is None else {"type": event["kind"], "time": float(event["time"])}
 
 
-def _check_record(record: Mapping[str, Any]) -> None:
-    missing = [key for key in ("scenario", "seed") if record.get(key) is None]
-    if not (record.get("result") or {}).get("trajectory_hash"):
+def _episode_record(record: Union[EpisodeRecord, Mapping[str, Any]]) -> EpisodeRecord:
+    """The episode record ``record`` (a record, or its JSON object as ``episodes.jsonl`` holds it), checked to have
+    what a re-run needs: the scenario, the seed and the result's trajectory hash."""
+    if isinstance(record, EpisodeRecord):
+        data = record.to_dict()
+    elif isinstance(record, Mapping):
+        data = record
+    else:
+        raise FailureReplayError(f"a failure record must be an episode record of episodes.jsonl, not "
+                                 f"{type(record).__name__}")
+    missing = [key for key in ("scenario", "seed") if data.get(key) is None]
+    if not (data.get("result") or {}).get("trajectory_hash"):
         missing.append("result.trajectory_hash")
     if missing:
         raise FailureReplayError(f"the failure record lacks {', '.join(missing)}; pass an episode record of "
                                  "episodes.jsonl (or a saved episode trace)")
+    try:
+        return EpisodeRecord.from_dict(record)
+    except RecordError as error:
+        raise FailureReplayError(f"the failure record is not an episode record of episodes.jsonl: {error}") from None
 
 
 def _run_episode(env, policy, scenario: str, seed: int, params: Mapping[str, Any], frames):
@@ -197,8 +211,8 @@ class _LastObservation(gym.Wrapper):
         return result
 
 
-def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[PathLike] = None,
-                  env_config: Optional[Mapping[str, Any]] = None, render: bool = False,
+def rerun_failure(record: Union[EpisodeRecord, Mapping[str, Any]], *, policy: Any,
+                  bank_dir: Optional[PathLike] = None, env_config: Optional[Mapping[str, Any]] = None, render: bool = False,
                   extra_steps: int = 0, camera: Optional[Mapping[str, Any]] = None) -> Tuple[Any, Any, List[np.ndarray]]:
     """Re-run an episode record with ``policy`` (a spec or a :class:`~policies.registry.Policy`).
 
@@ -207,18 +221,18 @@ def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[
     ``camera`` (:func:`clip_camera`) on top. Raises :class:`FailureReplayError` when the trajectory hash differs
     from the record's.
     """
-    _check_record(record)
+    record = _episode_record(record)
     config = dict(env_config or {})
     if render:
         config.update(VIDEO_CONFIG)
         config.update(camera or {})
-    env = make_eval_env([record["scenario"]], config=config, bank_dir=str(bank_dir) if bank_dir else None,
+    env = make_eval_env([record.scenario], config=config, bank_dir=str(bank_dir) if bank_dir else None,
                         render_mode="rgb_array" if render else None)
-    expected = record["result"]["trajectory_hash"]
-    scene = _Scene(record["scenario"], int(record["seed"]), record.get("params") or {})
+    expected = record.result["trajectory_hash"]
+    scene = _Scene(record.scenario, int(record.seed), record.params or {})
     return _checked_run(env, policy, scene, render, extra_steps, expected,
-                        lambda got: (f"the replay of episode {record.get('index', '?')} ({record['scenario']}, seed "
-                                     f"{record['seed']}) diverged: trajectory hash {got[:12]} != recorded "
+                        lambda got: (f"the replay of episode {record.index} ({record.scenario}, seed "
+                                     f"{record.seed}) diverged: trajectory hash {got[:12]} != recorded "
                                      f"{expected[:12]}; re-run with the mining run's policy, env config and "
                                      "dv2s-gym version"))
 
@@ -307,7 +321,7 @@ class VideoSettings:
         return dataclasses.replace(settings or cls(), **dict(options))
 
 
-def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike,
+def record_failure_video(record_or_trace: Union[EpisodeRecord, Mapping[str, Any], Any, PathLike], out_path: PathLike,
                          settings: Optional[VideoSettings] = None, *, trace_path: Optional[PathLike] = None,
                          **options: Any) -> Path:
     """Write the bird's-eye video of a failure (``.webm``) and its trace; returns the video's path.
@@ -317,7 +331,7 @@ def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike
     :class:`~envs.trace.EpisodeTrace` or trace file (replayed with its recorded actions; ``policy`` is
     not needed, and the clip cannot run past the trace's end). ``settings`` (:class:`VideoSettings`), or its
     fields given one by one as keywords (``policy=``, ``before=``...). The clip holds the frames from
-    ``before`` seconds before the failure (``record["failure"]``; for a trace, its first ego
+    ``before`` seconds before the failure (the record's ``failure``; for a trace, its first ego
     collision or off-road event) through ``after`` seconds after it, at the policy frequency:
     ``round(before * f) + round(after * f) + 1`` frames unless the episode started less than
     ``before`` seconds before the failure. A record's ``stall`` covers the stall: the window runs from
@@ -361,7 +375,7 @@ def _write_window(out_path: Path, frames: List[np.ndarray], trace, k: int, frequ
     return start, end
 
 
-def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike,
+def write_failure_video(record_or_trace: Union[EpisodeRecord, Mapping[str, Any], Any, PathLike], out_path: PathLike,
                         settings: Optional[VideoSettings] = None, *, trace_path: Optional[PathLike] = None,
                         **options: Any) -> FailureVideo:
     """:func:`record_failure_video`, returning a :class:`FailureVideo` (window, result, trace)."""
@@ -369,8 +383,8 @@ def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike]
     _check_window(settings)
     out_path = Path(out_path)
     trace_path = Path(trace_path) if trace_path is not None else out_path.parent / "trace.json.gz"
-    if isinstance(record_or_trace, Mapping):
-        clip = _record_clip(record_or_trace, settings)
+    if isinstance(record_or_trace, (EpisodeRecord, Mapping)):
+        clip = _record_clip(_episode_record(record_or_trace), settings)
     else:
         clip = _trace_clip(record_or_trace, settings)
     frames, result, trace, frequency, k, stall = clip
@@ -388,15 +402,15 @@ def _check_window(settings: VideoSettings) -> None:
         raise FailureReplayError(f"stall_seconds must be > 0, not {stall_seconds}")
 
 
-def _record_clip(record: Mapping[str, Any], settings: VideoSettings) -> tuple:
+def _record_clip(record: EpisodeRecord, settings: VideoSettings) -> tuple:
     """``(frames, result, trace, frequency, failure frame, stall)`` of an episode record, re-run far enough past
     its end to show ``after`` seconds (and a stall's standing frames) past the failure."""
     if settings.policy is None:
         raise FailureReplayError("re-running a failure record needs the policy that failed (policy=...)")
     frequency = _frequency({**VIDEO_CONFIG, **dict(settings.env_config or {})})
-    steps = int((record.get("result") or {}).get("steps") or 0)
-    k = failure_step(record.get("failure"), steps, frequency)
-    stall = (record.get("failure") or {}).get("type") == "stall"
+    steps = int((record.result or {}).get("steps") or 0)
+    k = failure_step(record.failure, steps, frequency)
+    stall = (record.failure or {}).get("type") == "stall"
     span = _stall_span(settings, frequency) if stall else 0  # an upper bound of the stall's frames
     end = k + span + int(round(settings.after * frequency))
     camera: Dict[str, Any] = {}
@@ -405,8 +419,8 @@ def _record_clip(record: Mapping[str, Any], settings: VideoSettings) -> tuple:
                                               env_config=settings.env_config, render=True,
                                               extra_steps=max(0, end - steps), camera=camera)
         frequency = _frequency(trace.config)
-        k = failure_step(record.get("failure"), len(trace.actions), frequency)
-        wanted = _camera(trace, record.get("failure"), k, frequency, stall, settings, len(frames))
+        k = failure_step(record.failure, len(trace.actions), frequency)
+        wanted = _camera(trace, record.failure, k, frequency, stall, settings, len(frames))
         if wanted == camera or attempt:  # the actor is in view (the second run's trace is the first's: same hash)
             break
         camera = wanted

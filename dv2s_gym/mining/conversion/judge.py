@@ -6,8 +6,9 @@ least :data:`COMPARED_SHARE` of them compared).
 
 from __future__ import annotations
 
-from typing import Any, List, Mapping, Optional
+from typing import Any, List, Mapping, Optional, Union
 
+from dv2s_gym.mining.conversion.interaction import FailureInteraction
 from dv2s_gym.mining.conversion.ranges import exact_number
 from dv2s_gym.mining.conversion.rejection import ConversionRejected
 from dv2s_gym.mining.report_text import not_compared_names_text
@@ -41,8 +42,8 @@ _KEY_REJECTIONS = (
 conversion, each with what is wrong, in the order the rejection reasons list them."""
 
 
-def judge_conversion(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failure: Mapping[str, Any],
-                     threshold: float) -> List[ConversionRejected]:
+def judge_conversion(out: Mapping[str, Any], interaction: Union[FailureInteraction, Mapping[str, Any]],
+                     source_failure: Mapping[str, Any], threshold: float) -> List[ConversionRejected]:
     """The checks a converted script must pass, each failing one a rejection with its own stage:
     ``interaction`` (its runs show the failure's actor doing its manoeuvre), ``reproduction`` (the policy
     fails the same way with the same kind of actor), ``avoidability`` (the reference driver drives most
@@ -52,16 +53,17 @@ def judge_conversion(out: Mapping[str, Any], interaction: Mapping[str, Any], sou
     failure's parameters contain the failing values; ``out["parameters"]``,
     :func:`~dv2s_gym.mining.conversion.parameters.compare_parameters`)."""
     found: List[ConversionRejected] = []
+    interaction = FailureInteraction.from_dict(interaction)
     repro = out["reproduction"]
     k = repro["k"]
-    what = f"{interaction.get('kind')} ({', '.join(interaction.get('manoeuvres') or []) or 'no manoeuvre'})"
-    if interaction.get("kind") and repro["interaction_shown"] / k < threshold:
+    what = f"{interaction.kind} ({', '.join(interaction.manoeuvres or ()) or 'no manoeuvre'})"
+    if interaction.kind and repro["interaction_shown"] / k < threshold:
         found.append(ConversionRejected("interaction", f"the new scenario's runs show the failure's {what} in "
                                                        f"{repro['interaction_shown']} of {k} episodes (share "
                                                        f"{repro['interaction_shown'] / k:.2f} < threshold "
                                                        f"{threshold:g})"))
     if repro["rate"] < threshold:
-        with_kind = f" with a {interaction['kind']}" if interaction.get("kind") else ""
+        with_kind = f" with a {interaction.kind}" if interaction.kind else ""
         found.append(ConversionRejected("reproduction", f"the new scenario reproduced the {source_failure['type']} "
                                                         f"failure{with_kind} in {repro['reproduced']} of {k} episodes "
                                                         f"(rate {repro['rate']:.2f} < threshold {threshold:g})"))

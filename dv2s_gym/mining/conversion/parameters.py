@@ -10,6 +10,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from dv2s_gym.mining.conversion.interaction import FailureInteraction
 from dv2s_gym.mining.conversion.keys import check_keys
 from dv2s_gym.mining.conversion.ranges import comparison_contains, script_ranges, script_supports
 from dv2s_gym.mining.conversion.param_meaning import (key_uses, meaning_map, name_mismatch, quantity_uses, script_parameters,
@@ -24,7 +25,7 @@ PathLike = Union[str, os.PathLike]
 
 
 def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional[str] = None,
-                       interaction: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
+                       interaction: Union[FailureInteraction, Mapping[str, Any], None] = None) -> Dict[str, Any]:
     """The failing parameter values against the ranges of the new script's global parameters that mean the same:
     first by name, without regard to case (``param x = Range(a, b)`` and the other numeric forms
     :func:`scenario_bank.dedup.param_ranges` reads), then, given the ``parent`` script the failure ran, by meaning
@@ -82,9 +83,9 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     why = {name: "the new script defines no numeric parameter of that name" for name in absent}
     keyed: Dict[str, List[Tuple[str, str, str, str]]] = {}
     if parent is not None:
-        interaction = interaction or {}
-        keyed = {name: where for name, where in key_uses(parent, interaction.get("kind"),
-                                                         interaction.get("actor")).items() if name in numeric}
+        interaction = FailureInteraction.from_dict(interaction) if interaction is not None else FailureInteraction()
+        keyed = {name: where for name, where in key_uses(parent, interaction.kind,
+                                                         interaction.actor).items() if name in numeric}
         meanings = {name: {(obj == "ego", kind, slot) for obj, kind, slot, _ in where} for name, where in keyed.items()}
         why = _by_meaning(parent, script, numeric, compared, absent, ranges, meanings)
     for name in sorted(compared):
@@ -98,7 +99,7 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     if partly:
         out["quantities_not_compared"] = partly
     if parent is not None:
-        check_keys(parent, script, keyed, numeric, out, interaction.get("actor"))
+        check_keys(parent, script, keyed, numeric, out, interaction.actor)
     return out
 
 
