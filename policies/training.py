@@ -73,7 +73,7 @@ from scenario_bank.field_checks import (check_bool, check_choice, check_int, che
                                         check_number, check_path)
 from scenario_bank.bank import Bank
 from scenario_bank.run_identity import (BANK_IDENTITY, RunIdentityError, bank_identity, check_bank_unchanged,
-                                       check_format, check_identity, record_format)
+                                       check_format, check_identity, check_run_kind, record_format)
 from policies.run_identity import CODE_IDENTITY, check_code_unchanged, code_identity
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
@@ -755,6 +755,7 @@ def load_run_config(out: os.PathLike | str) -> Tuple[TrainConfig, Dict[str, Any]
     """The settings and the ``run.json`` record of the run in ``out`` (one of another format, :data:`_RUN_VERSION`,
     is refused)."""
     path = Path(out) / "run.json"
+    check_run_kind(out, _RUN_SCHEMA, error=TrainingError)
     if not path.is_file():
         raise TrainingError(f"{out} holds no training run (no run.json); start one without --resume")
     try:
@@ -976,6 +977,7 @@ def _open_record(config: TrainConfig, names: Sequence[str], resume: bool, log: C
     ``config.out``: a resumed run's record (checked against ``config``, the scripts and the code), or a new one
     (refused over an existing run)."""
     out = Path(config.out)
+    check_run_kind(out, _RUN_SCHEMA, error=TrainingError)
     checkpoint = latest_checkpoint(out)
     record: Dict[str, Any] = _new_run_record(config, names)
     if resume:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
 
 from scenario_bank.dedup import content_hash
@@ -27,7 +28,7 @@ from scenario_bank.errors import DV2SError
 
 __all__ = ["RunIdentityError", "identity_of", "differing", "check_identity", "setting", "resume_keys",
            "recorded_settings", "record_format", "check_format", "FORMAT_KEYS", "BANK_IDENTITY", "bank_identity",
-           "check_bank_unchanged"]
+           "check_bank_unchanged", "RUN_KINDS", "check_run_kind"]
 
 _SHOWN = 3
 """Differences spelled out in a refusal (the rest are counted)."""
@@ -128,6 +129,33 @@ def check_format(record: Any, schema: str, version: int, *, folder: Any, what: s
     written = f"format {found}" if isinstance(found, int) and not isinstance(found, bool) else "no format"
     raise error(f"{folder} holds {what} written by another version of dv2s-gym (its {file} records {written}, "
                 f"this dv2s-gym reads format {version}); start a new --out folder")
+
+
+RUN_KINDS = {"dv2s-mine": ("settings.json", "a mining run"), "dv2s-regress-run": ("run.json", "a regression run"),
+             "dv2s-train-run": ("run.json", "a training run"), "dv2s-loop-state": ("loop.json", "a loop")}
+"""Every kind of run folder, by the schema of its record: ``{schema: (the record's file, what the folder holds)}``.
+All of them write ``report.json``/``.md``/``.html`` at the top of their folder, so no two share one."""
+
+
+def check_run_kind(folder: Any, schema: str, *, error: Type[Exception]) -> None:
+    """Refuse to run a run of ``schema`` (a :data:`RUN_KINDS` key) in ``folder`` when it holds a run of another
+    kind (whose reports the new run would write over).
+
+    Raises:
+        error: ``"<folder> holds <a mining run> (its settings.json), not <a loop>: pass another --out"``.
+    """
+    own = RUN_KINDS[schema][1]
+    for other, (file, what) in RUN_KINDS.items():
+        path = Path(folder) / file
+        if other == schema or not path.is_file():
+            continue
+        try:
+            record = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue  # not a record of that kind: its own check, if any, says what is wrong
+        if isinstance(record, Mapping) and record.get("schema") == other:
+            raise error(f"{folder} holds {what} (its {file}), not {own}: pass another --out (a run writes its "
+                        "reports at the top of its folder, over the other run's)")
 
 
 # --------------------------------------------------------------------------- settings dataclasses

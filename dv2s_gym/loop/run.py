@@ -107,7 +107,7 @@ from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
 from scenario_bank.records import EpisodeRecord, HeldOutEpisode, RecordError
 from scenario_bank.run_identity import (BANK_IDENTITY, bank_identity, check_bank_unchanged, check_format,
-                                       check_identity, record_format)
+                                       check_identity, check_run_kind, record_format)
 from policies.evaluation import EVAL_SEED_BASE
 from policies.card_record import FineTune, FineTuneMethod
 from policies.registry import SB3_ALGORITHMS, read_model_card
@@ -181,6 +181,7 @@ class _State:
 
     def __init__(self, path: Path, settings: Dict[str, Any]) -> None:
         self.path = path
+        check_run_kind(path.parent, STATE_SCHEMA, error=LoopError)
         if path.is_file():
             try:
                 data = json.loads(path.read_text(encoding="utf-8"))

@@ -82,7 +82,7 @@ from scenario_bank.records import EpisodeRecord, JsonRecord, RecordError
 from scenario_bank.failure_types import failure_table
 from scenario_bank.jail import JailUnavailableError, require_jail
 from scenario_bank.run_identity import (BANK_IDENTITY, bank_identity, check_bank_unchanged, check_format,
-                                       check_identity, record_format)
+                                       check_identity, check_run_kind, record_format)
 from policies.registry import load_policy
 from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, check_code_unchanged, check_policy_unchanged,
                                    code_identity, resume_fingerprint)
@@ -321,6 +321,7 @@ class _Mining:
 def _read_settings(out: Path) -> Optional[RunSettings]:
     """The run folder's ``settings.json`` (``None`` when there is none); a damaged one, or one of another format
     (:data:`SETTINGS_VERSION`), is refused in one line naming the file and the fix."""
+    check_run_kind(out, SETTINGS_SCHEMA, error=MiningError)
     saved = read_run_settings(out)
     if saved is not None:
         check_format(saved.values, SETTINGS_SCHEMA, SETTINGS_VERSION, folder=out, what="a mining run",

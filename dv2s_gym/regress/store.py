@@ -23,7 +23,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple, Union
 from dv2s_gym.regress.errors import RegressError, ResumeMismatchError
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.records import RecordError, RegressEpisode
-from scenario_bank.run_identity import check_format, check_identity, record_format
+from scenario_bank.run_identity import check_format, check_identity, check_run_kind, record_format
 
 __all__ = ["RunStore", "RUN_FILE", "RESULTS_FILE", "TRACES_DIR", "describe_differences"]
 
@@ -78,6 +78,7 @@ class RunStore:
             raise RegressError(f"--out {self.root} is a file; give a folder for the run's reports")
         self.root.mkdir(parents=True, exist_ok=True)
         run_file = self.root / RUN_FILE
+        check_run_kind(self.root, _RUN_SCHEMA, error=RegressError)
         if run_file.is_file():
             try:
                 stored = json.loads(run_file.read_text(encoding="utf-8"))
