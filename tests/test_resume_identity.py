@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import re
 import sys
 import warnings
 
@@ -64,6 +65,30 @@ def plugin(tmp_path, monkeypatch):
     yield path
     module.unregister()
     sys.modules.pop(PLUGIN, None)
+
+
+HELPED = "identity_probe_helped_plugin"
+HELPER = "identity_probe_helper"
+
+
+@pytest.fixture
+def helped_plugin(tmp_path, monkeypatch):
+    """A plug-in module whose detector's limit lives in a helper module of another folder on the Python path (a
+    ``lib/`` of the user's), imported; the helper's path is yielded, the plug-in undone after."""
+    lib, folder = tmp_path / "lib", tmp_path / "plugins"
+    lib.mkdir()
+    folder.mkdir()
+    helper = lib / f"{HELPER}.py"
+    helper.write_text("LIMIT = 1\n", encoding="utf-8")
+    (folder / f"{HELPED}.py").write_text(f"import {HELPER}\n" + PLUGIN_SOURCE.format(limit=f"{HELPER}.LIMIT"),
+                                         encoding="utf-8")
+    monkeypatch.syspath_prepend(str(lib))
+    monkeypatch.syspath_prepend(str(folder))
+    module = importlib.import_module(HELPED)
+    yield helper
+    module.unregister()
+    sys.modules.pop(HELPED, None)
+    sys.modules.pop(HELPER, None)
 
 
 @pytest.fixture
@@ -132,6 +157,43 @@ def test_a_mining_resume_with_a_changed_or_missing_plugin_is_refused_naming_it(p
                                           r"failure types, detectors differ: "):
         _mine_settings_folder(folder)
     importlib.reload(sys.modules[PLUGIN])  # registered again, for the fixture to undo
+
+
+def test_a_plugins_helper_module_in_another_folder_is_fingerprinted_and_its_edit_refuses_a_resume(
+        helped_plugin, tmp_path, monkeypatch):
+    key = f"module file {helped_plugin.resolve()} (SHA-256)"
+    before = code_identity()
+    assert before["plug-in modules"] == [HELPED] and before[key] == run_identity.file_sha256(helped_plugin)
+    folder = recorded_run_folder(tmp_path / "mine", (SCENARIO,), monkeypatch)
+    with pytest.raises(SpaceBuilt):  # unchanged: past every check made before the space is built
+        _mine_settings_folder(folder)
+    helped_plugin.write_text("LIMIT = 1000\n", encoding="utf-8")  # the limit the detector uses, edited
+    assert code_identity()[key] == run_identity.file_sha256(helped_plugin) != before[key]
+    with pytest.raises(MiningError) as error:
+        _mine_settings_folder(folder)
+    assert str(error.value).startswith(f"{folder} holds a mining run made with other code (plug-in modules' source "
+                                       f"differ: {key}: run has {before[key][:12]}, now ")
+
+
+def test_a_loaded_module_the_run_did_not_have_is_not_compared_and_a_recorded_one_is_hashed_again(helped_plugin,
+                                                                                                    tmp_path):
+    """A resume compares the user's files as the run recorded them: one loaded since (a notebook's helper) is left
+    out, one the run had loaded is hashed again even when this process has not loaded it."""
+    recorded_file = tmp_path / "recorded_helper.py"
+    recorded_file.write_text("X = 1\n", encoding="utf-8")
+    recorded_key = f"module file {recorded_file.resolve()} (SHA-256)"
+    now = code_identity()
+    extra = [key for key in now if key.startswith("module file ")]
+    assert f"module file {helped_plugin.resolve()} (SHA-256)" in extra and recorded_key not in now
+    recorded = {CODE_IDENTITY: {**{k: v for k, v in now.items() if k not in extra},
+                                recorded_key: run_identity.file_sha256(recorded_file)}}
+    run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError, now=now)
+    recorded_file.write_text("X = 2\n", encoding="utf-8")
+    with pytest.raises(MiningError, match=f"plug-in modules' source differ: {re.escape(recorded_key)}: run has "):
+        run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError, now=now)
+    recorded_file.unlink()
+    with pytest.raises(MiningError, match=r"\(SHA-256\): run has [0-9a-f]{12}, now missing\)"):
+        run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError, now=now)
 
 
 def test_a_mining_resume_after_a_builtin_detector_was_replaced_is_refused(replaced_collision, tmp_path, monkeypatch):
