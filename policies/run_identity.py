@@ -24,9 +24,11 @@ into its run folder first.)
 
 The code half is :func:`code_identity`, recorded by every resumable run kind under :data:`CODE_IDENTITY` and checked
 by :func:`check_code_unchanged`: one SHA-256 over dv2s's own sources (every ``.py`` file of its four packages, so
-an edited editable install is noticed), the plug-in modules loaded in this process (``DV2S_PLUGINS``, and those of
-every registered failure type and detector) with the fingerprints of their source (as a ``module:attribute``
-policy's), what they registered (failure type or detector name -> module) and the built-in entries they replaced.
+an edited editable install is noticed), the plug-in modules loaded in this process (``DV2S_PLUGINS``, those of
+every registered failure type, detector and policy, and those that registered a sampler or a DRA/SG backend,
+:func:`scenario_bank.plugins.code_modules`; a registration in ``__main__`` by the script's file, when it has one)
+with the fingerprints of their source (as a ``module:attribute`` policy's), what they registered (failure type or
+detector name -> module) and the built-in entries they replaced.
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ from policies.registry import (SB3_ALGORITHMS, SHIPPED_CHECKPOINT, parse_spec, r
 from scenario_bank.atomic import file_sha256
 from scenario_bank.failure_types import plugin_table
 from scenario_bank.named_registry import replaced_built_ins
-from scenario_bank.plugins import plugin_modules
+from scenario_bank.plugins import MAIN, code_modules
 
 __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "check_policy_unchanged",
            "checkpoint_path", "installed_version", "MAX_HELPER_FILES", "CODE_IDENTITY", "dv2s_sources_sha256",
@@ -104,6 +106,9 @@ def _loaded_user_files() -> List[Path]:
 
 
 def _module_file(name: str) -> Optional[Path]:
+    if name == MAIN:  # a script's registrations: its file (none for python -c or an interactive session)
+        main_file = getattr(sys.modules.get("__main__"), "__file__", None)
+        return Path(main_file) if main_file and Path(main_file).is_file() else None
     try:
         spec = importlib.util.find_spec(name)
     except (ImportError, ValueError):
@@ -271,10 +276,10 @@ def dv2s_sources_sha256() -> str:
 
 def code_identity() -> Dict[str, Any]:
     """What a resumed run must find unchanged in the code it runs, ``{description: value}`` (module docstring):
-    ``"dv2s sources (SHA-256)"``, ``"plug-in modules"`` (sorted names) with each one's
-    :func:`module_fingerprint`, ``"failure types"`` and ``"detectors"`` registered by plug-ins (name -> module) and
+    ``"dv2s sources (SHA-256)"``, ``"plug-in modules"`` (:func:`~scenario_bank.plugins.code_modules`) with each
+    one's :func:`module_fingerprint`, ``"failure types"`` and ``"detectors"`` registered by plug-ins (name -> module) and
     ``"replaced built-ins"`` (:func:`scenario_bank.named_registry.replaced_built_ins`)."""
-    modules = plugin_modules()
+    modules = code_modules()
     facts: Dict[str, Any] = {"dv2s sources (SHA-256)": dv2s_sources_sha256(), "plug-in modules": modules}
     for module in modules:
         facts.update(module_fingerprint(module))

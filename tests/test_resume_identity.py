@@ -11,6 +11,7 @@ import importlib
 import json
 import re
 import sys
+import types
 import warnings
 
 import pytest
@@ -26,6 +27,7 @@ from policies.training import TrainConfig, run_settings, train
 from scenario_bank.bank import Bank
 from scenario_bank.errors import BuiltInReplacedWarning
 from scenario_bank.named_registry import replaced_built_ins
+from scenario_bank.plugins import check_plugins, plugin_modules
 from scenario_bank.run_identity import BANK_IDENTITY, RunIdentityError, bank_identity
 
 SCENARIO = "highway_lead_vehicle_brakes"
@@ -194,6 +196,70 @@ def test_a_loaded_module_the_run_did_not_have_is_not_compared_and_a_recorded_one
     recorded_file.unlink()
     with pytest.raises(MiningError, match=r"\(SHA-256\): run has [0-9a-f]{12}, now missing\)"):
         run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError, now=now)
+
+
+SAMPLER_SOURCE = '''
+from dv2s_gym.mining.sampling.samplers import SamplerRecord, register_sampler, registered_samplers
+
+UPPER = {upper}
+
+
+def build(space, feature_space, params):
+    return None
+
+
+register_sampler("identity_probe_upper", SamplerRecord(build))
+'''
+
+
+@pytest.fixture
+def sampler_registry(monkeypatch):
+    """The sampler registry as a copy, dropped after the test."""
+    from dv2s_gym.mining.sampling import samplers
+
+    monkeypatch.setattr(samplers, "_REGISTRY", samplers._REGISTRY.copy())
+
+
+def test_a_module_that_registered_a_sampler_is_part_of_the_code_identity_not_of_the_workers_imports(
+        sampler_registry, tmp_path, monkeypatch):
+    module = "identity_probe_sampler"
+    path = tmp_path / f"{module}.py"
+    path.write_text(SAMPLER_SOURCE.format(upper=0.5), encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, module, raising=False)
+    importlib.import_module(module)
+    key = f"module {module} source (SHA-256)"
+    before = code_identity()
+    assert before["plug-in modules"] == [module] and before[key] == run_identity.file_sha256(path)
+    assert plugin_modules() == check_plugins() == []  # the workers are not asked to import it
+    recorded = {CODE_IDENTITY: before}
+    run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError)
+    path.write_text(SAMPLER_SOURCE.format(upper=0.9), encoding="utf-8")  # the sampler edited
+    assert code_identity()[key] == run_identity.file_sha256(path) != before[key]
+    with pytest.raises(MiningError, match=r"^out holds a mining run made with other code \(plug-in modules' source "
+                                          f"differ: {re.escape(key)}: run has "):
+        run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError)
+    sys.modules.pop(module, None)
+
+
+def test_a_sampler_registered_in_main_is_fingerprinted_by_the_scripts_file_and_stays_allowed(
+        sampler_registry, tmp_path, monkeypatch):
+    from dv2s_gym.mining.sampling.samplers import SamplerRecord, register_sampler
+
+    script = tmp_path / "run_mine.py"
+    script.write_text("# the user's script\n", encoding="utf-8")
+    main = types.ModuleType("__main__")
+    main.__file__ = str(script)
+    monkeypatch.setitem(sys.modules, "__main__", main)
+    exec(compile("register_sampler('from_main', SamplerRecord(lambda space, features, params: None))", str(script),
+                 "exec"), {"__name__": "__main__", "register_sampler": register_sampler, "SamplerRecord": SamplerRecord})
+    facts = code_identity()
+    assert facts["plug-in modules"] == ["__main__"] and check_plugins() == []  # allowed for runs with workers
+    assert facts["module __main__ source (SHA-256)"] == run_identity.file_sha256(script)
+    script.write_text("# the user's script, edited\n", encoding="utf-8")
+    assert code_identity()["module __main__ source (SHA-256)"] == run_identity.file_sha256(script)
+    monkeypatch.delattr(main, "__file__")  # python -c, an interactive session: no file to fingerprint
+    assert code_identity()["module __main__ source (SHA-256)"] == "not found"
 
 
 def test_a_mining_resume_after_a_builtin_detector_was_replaced_is_refused(replaced_collision, tmp_path, monkeypatch):

@@ -56,6 +56,7 @@ import numpy as np
 from dv2s_gym.mining.sampling.checkpoint_mac import seal, unseal
 from dv2s_gym.mining.errors import MiningError
 from scenario_bank.named_registry import Registry
+from scenario_bank.plugins import registering_module, remember_code
 
 __all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "NOVELTY",
            "SceneSampler", "SamplerRecord", "default_feedback", "make_sampler", "sampler_params", "is_adaptive",
@@ -129,8 +130,10 @@ def is_uniform(name: str) -> bool:
 
 def register_sampler(name: str, record: SamplerRecord, overwrite: bool = False) -> None:
     """Make ``make_sampler(name, ...)`` (and ``--sampler name``) build ``record``'s sampler; a name registered
-    already needs ``overwrite=True``."""
+    already needs ``overwrite=True``. The calling module (``__main__`` too) is part of a run's code identity
+    (:func:`scenario_bank.plugins.remember_code`); the workers need nothing of it."""
     _REGISTRY.register(name, record, overwrite=overwrite)
+    remember_code(f"sampler {name!r}", registering_module())
 
 
 def registered_samplers() -> List[str]:
