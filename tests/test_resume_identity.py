@@ -1,9 +1,11 @@
 """One notion of "the same run" for every resumable run kind: a resume over an edited bank script, other or changed
-plug-ins (their detectors, failure types and sources, the built-ins they replace) or a changed reference driver is
-refused in one line naming what differs and the fix; an unchanged resume resumes.
+plug-ins (their detectors, failure types and sources, the built-ins they replace, the user's modules they load, the
+modules that registered a sampler) or a changed reference driver is refused in one line naming what differs and the
+fix; an unchanged resume resumes.
 
 ``dv2s loop`` is checked in ``tests/test_loop.py`` (its stand-ins live there); ``dv2s regress`` records the same
-code identity among its settings (``tests/test_regress_inputs.py`` and below)."""
+code and bank identities under the same keys and refuses in the same words (``tests/test_regress_inputs.py`` and
+below)."""
 
 from __future__ import annotations
 
@@ -378,14 +380,26 @@ def test_a_regression_resume_over_an_edited_script_or_a_changed_plugin_is_refuse
                progress=False, clips=False)
     run_regression("keep_lane", **run)
     run_regression("keep_lane", **run)  # unchanged: resumed
+    recorded = json.loads((tmp_path / "regress" / "run.json").read_text(encoding="utf-8"))["settings"]
+    assert recorded[CODE_IDENTITY] == code_identity() and recorded[BANK_IDENTITY] == bank_identity(Bank(bank),
+                                                                                                   [SCENARIO])
     plugin.write_text(PLUGIN_SOURCE.format(limit=2), encoding="utf-8")
-    with pytest.raises(ResumeMismatchError, match=f"module {PLUGIN} source \\(SHA-256\\): run has '"):
+    with pytest.raises(ResumeMismatchError) as error:  # said as every resumable run kind says it
         run_regression("keep_lane", **run)
+    assert str(error.value).startswith(f"{tmp_path / 'regress'} holds a regression run made with other code (plug-in "
+                                       f"modules' source differ: module {PLUGIN} source (SHA-256): run has ")
+    assert str(error.value).endswith("restore the code the run used (dv2s's sources, the plug-in modules DV2S_PLUGINS "
+                                     "names), or start a new --out folder (its reports (junit.xml, report.html, "
+                                     "report.md, report.json) are that run's, not this one's: nothing was written, so "
+                                     "do not read them as this run's verdict)")
     plugin.write_text(PLUGIN_SOURCE.format(limit=1), encoding="utf-8")
     script = bank / SCENARIO / "scenario.scenic"
     script.write_text(script.read_text(encoding="utf-8") + "\n# edited\n", encoding="utf-8")
-    with pytest.raises(ResumeMismatchError, match=f"the bank's script for '{SCENARIO}' \\(SHA-256\\): run has '"):
+    with pytest.raises(ResumeMismatchError) as error:
         run_regression("keep_lane", **run)
+    assert str(error.value).startswith(f"{tmp_path / 'regress'} holds a regression run over other scenario scripts "
+                                       f"(the bank's script for '{SCENARIO}' changed since the run began); restore the "
+                                       "script as the run used it, or start a new --out folder")
 
 
 # --------------------------------------------------------------------------- a DAgger fine-tuning
