@@ -7,22 +7,28 @@ module gives, for a policy spec, the facts that decide how the policy drives (:f
   the model card beside it);
 - ``module:attribute``: the SHA-256 of the module's source file, and of the user's own modules the policy may use:
   every ``.py`` file beside it (its package's tree when it is in a package; at most :data:`MAX_HELPER_FILES`), and
-  every module loaded in this process from under that folder, leaving out the standard library, site-packages and
-  dv2s's own packages;
+  every module loaded in this process whose file is the user's code, wherever it lives (a ``lib/`` folder on the
+  Python path, an editable install of the user's package, the script run as ``__main__``): all but the standard
+  library, site-packages (and dist-packages), the environment's scripts folder and dv2s's own packages;
 - a registered driver (``rule``, ``idm``, ...): the SHA-256 of the module that implements it;
 - the spec's options, typed and sorted, and the bytes (SHA-256) of every option value that names an existing file
   (``?weights=weights.json``), and the dv2s version.
 
 ``dv2s mine``, ``dv2s loop`` and ``dv2s regress`` record them when a run starts and refuse, with
-:func:`check_policy_unchanged`, to resume it when the same spec now names a changed checkpoint or module. (A DAgger
+:func:`check_policy_unchanged`, to resume it when the same spec now names a changed checkpoint or module. A loaded
+module's file is compared as the run recorded it: each file the run recorded is hashed again (edited or deleted
+since, the resume is refused), and a module this process loaded that the run did not have loaded is not compared
+(a notebook's own helpers, say), as it cannot have decided what the run did before. (A DAgger
 fine-tuning records its source checkpoint's SHA-256 among its settings; a PPO fine-tuning copies the checkpoint
 into its run folder first.)
 
 The code half is :func:`code_identity`, recorded by every resumable run kind under :data:`CODE_IDENTITY` and checked
 by :func:`check_code_unchanged`: one SHA-256 over dv2s's own sources (every ``.py`` file of its four packages, so
-an edited editable install is noticed), the plug-in modules loaded in this process (``DV2S_PLUGINS``, and those of
-every registered failure type and detector) with the fingerprints of their source (as a ``module:attribute``
-policy's), what they registered (failure type or detector name -> module) and the built-in entries they replaced.
+an edited editable install is noticed), the plug-in modules loaded in this process (``DV2S_PLUGINS``, those of
+every registered failure type, detector and policy, and those that registered a sampler or a DRA/SG backend,
+:func:`scenario_bank.plugins.code_modules`; a registration in ``__main__`` by the script's file, when it has one)
+with the fingerprints of their source (as a ``module:attribute`` policy's), what they registered (failure type or
+detector name -> module) and the built-in entries they replaced.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import json
+import re
 import sys
 import sysconfig
 from importlib import metadata
@@ -41,7 +48,7 @@ from policies.registry import (SB3_ALGORITHMS, SHIPPED_CHECKPOINT, parse_spec, r
 from scenario_bank.atomic import file_sha256
 from scenario_bank.failure_types import plugin_table
 from scenario_bank.named_registry import replaced_built_ins
-from scenario_bank.plugins import plugin_modules
+from scenario_bank.plugins import MAIN, code_modules
 
 __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "check_policy_unchanged",
            "checkpoint_path", "installed_version", "MAX_HELPER_FILES", "CODE_IDENTITY", "dv2s_sources_sha256",
@@ -56,7 +63,7 @@ _SKIPPED_DIRS = {"__pycache__", "site-packages", "dist-packages", "node_modules"
 
 
 def _outside_user_code() -> List[Path]:
-    roots = {sysconfig.get_paths()[key] for key in ("stdlib", "platstdlib", "purelib", "platlib")}
+    roots = {sysconfig.get_paths()[key] for key in ("stdlib", "platstdlib", "purelib", "platlib", "scripts")}
     return [Path(r).resolve() for r in roots if r] + [_DV2S_ROOT / p for p in _DV2S_PACKAGES]
 
 
@@ -79,17 +86,29 @@ def _helper_files(module_file: Path, module: str) -> List[Path]:
         if len(found) >= MAX_HELPER_FILES:
             break
         found.add(path.resolve())
+    found.update(_loaded_user_files())
+    return sorted(p for p in found if p.is_file() and not _is_under(p, excluded))
+
+
+def _loaded_user_files() -> List[Path]:
+    """The ``.py`` file of every module loaded in this process that is the user's code, wherever it lives (module
+    docstring)."""
+    excluded = _outside_user_code()
+    found = set()
     for loaded in list(sys.modules.values()):
         name = getattr(loaded, "__file__", None)
         if not name or not str(name).endswith(".py"):
             continue
         path = Path(name).resolve()
-        if folder in path.parents and path.is_file():
+        if not (_SKIPPED_DIRS & set(path.parts)) and not _is_under(path, excluded) and path.is_file():
             found.add(path)
-    return sorted(p for p in found if p.is_file() and not _is_under(p, excluded))
+    return sorted(found)
 
 
 def _module_file(name: str) -> Optional[Path]:
+    if name == MAIN:  # a script's registrations: its file (none for python -c or an interactive session)
+        main_file = getattr(sys.modules.get("__main__"), "__file__", None)
+        return Path(main_file) if main_file and Path(main_file).is_file() else None
     try:
         spec = importlib.util.find_spec(name)
     except (ImportError, ValueError):
@@ -180,6 +199,22 @@ def fingerprint_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[s
             if recorded.get(key) != now.get(key)]
 
 
+_USER_FILE = re.compile(r"^module file (?P<path>.+) \(SHA-256\)$")
+"""A fact naming one of the user's files (:func:`module_fingerprint`), compared as the run recorded it."""
+
+
+def _as_recorded(recorded: Mapping[str, Any], now: Mapping[str, Any]) -> Dict[str, Any]:
+    """``now`` with the user's files (:data:`_USER_FILE`) as the run ``recorded`` them: each recorded file hashed as
+    it is now (``"missing"`` when gone), a file the run did not record left out (module docstring)."""
+    facts = {key: value for key, value in now.items() if key in recorded or not _USER_FILE.match(key)}
+    for key in recorded:
+        match = _USER_FILE.match(key)
+        if match and key not in now:
+            path = Path(match["path"])
+            facts[key] = file_sha256(path) if path.is_file() else "missing"
+    return facts
+
+
 def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: Any, run: str,
                            error: type, key: str = RESUME_FINGERPRINT, role: str = "policy") -> Dict[str, Any]:
     """The policy's :func:`resume_fingerprint`, after checking it against the one ``recorded`` under
@@ -192,7 +227,8 @@ def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: An
             restore the policy ..., or pass a new --out"`` when a fact differs.
     """
     now = resume_fingerprint(spec)
-    changes = fingerprint_changes(dict(recorded.get(key) or {}), now)
+    old = dict(recorded.get(key) or {})
+    changes = fingerprint_changes(old, _as_recorded(old, now))
     if changes and role != "policy":
         raise error(f"{folder} holds a {run} whose {role} {spec} has changed since ({'; '.join(changes[:3])}"
                     f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the {role} "
@@ -240,10 +276,10 @@ def dv2s_sources_sha256() -> str:
 
 def code_identity() -> Dict[str, Any]:
     """What a resumed run must find unchanged in the code it runs, ``{description: value}`` (module docstring):
-    ``"dv2s sources (SHA-256)"``, ``"plug-in modules"`` (sorted names) with each one's
-    :func:`module_fingerprint`, ``"failure types"`` and ``"detectors"`` registered by plug-ins (name -> module) and
+    ``"dv2s sources (SHA-256)"``, ``"plug-in modules"`` (:func:`~scenario_bank.plugins.code_modules`) with each
+    one's :func:`module_fingerprint`, ``"failure types"`` and ``"detectors"`` registered by plug-ins (name -> module) and
     ``"replaced built-ins"`` (:func:`scenario_bank.named_registry.replaced_built_ins`)."""
-    modules = plugin_modules()
+    modules = code_modules()
     facts: Dict[str, Any] = {"dv2s sources (SHA-256)": dv2s_sources_sha256(), "plug-in modules": modules}
     for module in modules:
         facts.update(module_fingerprint(module))
@@ -268,7 +304,7 @@ def check_code_unchanged(recorded: Mapping[str, Any], *, run: str, error: type,
     """
     current = dict(code_identity() if now is None else now)
     old = dict(recorded.get(CODE_IDENTITY) or {})
-    changes = fingerprint_changes(old, current)
+    changes = fingerprint_changes(old, _as_recorded(old, current))
     if changes:
         parts = sorted({_code_group(change.partition(":")[0]) for change in changes},
                        key=lambda name: [g for _, g in _CODE_GROUPS].index(name) if name in

@@ -10,6 +10,11 @@ A plug-in defined in ``__main__`` (a script, ``python -c``, an interactive sessi
 process; a run in worker processes refuses it (:func:`check_plugins`) and says to move it into an importable
 module, named on the command line by the :data:`PLUGINS_VARIABLE` environment variable
 (:func:`load_plugins_from_environment`, which ``dv2s`` reads before anything else).
+
+A sampler and a DRA or SG backend run in the parent process only: the workers need nothing of them, so their
+registrations are remembered apart (:func:`remember_code`), never imported by the workers, and allowed in
+``__main__``. A run's result depends on their code all the same, so :func:`code_modules` (what a run's code identity,
+:func:`policies.run_identity.code_identity`, fingerprints) lists both kinds.
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from typing import Dict, Iterable, List, Optional
 from scenario_bank.errors import DV2SError
 
 __all__ = ["PluginError", "PLUGINS_VARIABLE", "MAIN", "registering_module", "remember_plugin", "forget_plugin",
-           "plugin_modules", "check_plugins", "import_plugins", "load_plugins_from_environment", "module_not_found",
+           "plugin_modules", "remember_code", "code_modules", "check_plugins", "import_plugins", "load_plugins_from_environment", "module_not_found",
            "import_raised", "missing_attribute"]
 
 PLUGINS_VARIABLE = "DV2S_PLUGINS"
@@ -34,6 +39,9 @@ MAIN = "__main__"
 
 _ORIGINS: Dict[str, str] = {}
 """What was registered (``"failure type 'hard_brake'"``) -> the module it comes from."""
+
+_PARENT_ORIGINS: Dict[str, str] = {}
+"""What was registered that runs in this process only (``"sampler 'upper'"``) -> the module it comes from."""
 
 
 class PluginError(DV2SError, ValueError):
@@ -46,6 +54,14 @@ def remember_plugin(what: str, module: Optional[str]) -> None:
     workers import them anyway), nor is a ``None`` module."""
     if module:
         _ORIGINS[what] = module
+
+
+def remember_code(what: str, module: Optional[str]) -> None:
+    """Remember that ``what`` (e.g. ``"sampler 'upper'"``), which runs in this process only, was registered by
+    ``module`` (``__main__`` too): part of the code a run depends on (:func:`code_modules`), which the workers do not
+    import. The product's own modules and a ``None`` module are not remembered."""
+    if module:
+        _PARENT_ORIGINS[what] = module
 
 
 def registering_module() -> Optional[str]:
@@ -70,6 +86,13 @@ def forget_plugin(what: str) -> None:
 def plugin_modules() -> List[str]:
     """The modules of every plug-in registered in this process, sorted, each once."""
     return sorted(set(_ORIGINS.values()))
+
+
+def code_modules() -> List[str]:
+    """The modules whose registrations a run's result depends on, sorted, each once: the plug-in modules
+    (:func:`plugin_modules`) and those of the registrations that run in this process only (:func:`remember_code`),
+    ``__main__`` included."""
+    return sorted(set(_ORIGINS.values()) | set(_PARENT_ORIGINS.values()))
 
 
 def check_plugins() -> List[str]:

@@ -44,7 +44,9 @@ def pytest_collection_modifyitems(config, items):
 def plugin_modules_per_test(monkeypatch):
     """A test's registrations (a policy, a sampler, a backend registered by a test module or a module in a
     temporary folder) are remembered as plug-in modules for that test only: a later test's worker processes
-    would otherwise import them too, and a module in a removed folder cannot be imported."""
+    would otherwise import them too (and a later run's code identity name them), and a module in a removed folder
+    cannot be imported."""
     import scenario_bank.plugins as plugins
 
     monkeypatch.setattr(plugins, "_ORIGINS", dict(plugins._ORIGINS))
+    monkeypatch.setattr(plugins, "_PARENT_ORIGINS", dict(plugins._PARENT_ORIGINS))

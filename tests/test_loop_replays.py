@@ -56,7 +56,7 @@ def test_a_scene_the_reference_driver_failed_too_gets_no_replay_entry(record, tm
 @pytest.mark.slow
 def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(record, tmp_path):
     from dv2s_gym.mining.conversion.exact_replay import replay_versions
-    from dv2s_gym.regress.identity import dv2s_sources_sha256
+    from policies.run_identity import dv2s_sources_sha256
     from policies.run_identity import installed_version
     from envs.trace import TRACE_VERSION
     from policies.registry import SHIPPED_CHECKPOINT

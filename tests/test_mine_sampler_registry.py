@@ -64,3 +64,28 @@ def test_an_unknown_or_taken_sampler_name_is_refused(registry):
         register_sampler("halton", samplers._REGISTRY["random"])
     with pytest.raises(MiningError, match="sampler name '' must be a non-empty string"):
         register_sampler("", samplers._REGISTRY["random"])
+
+
+def test_a_built_sampler_without_the_methods_the_miner_calls_is_refused_naming_them(registry):
+    class NextSampleOnly:  # the name VerifAI's samplers do not use
+        def nextSample(self):
+            return None
+
+        def update(self, point, info, rho):
+            pass
+
+    class Neither:
+        pass
+
+    space = SceneSpace(["highway_lead_vehicle_brakes"])
+    register_sampler("next-only", SamplerRecord(lambda space, feature_space, params: NextSampleOnly()))
+    with pytest.raises(MiningError) as error:
+        make_sampler("next-only", space, 0)
+    assert str(error.value) == (
+        "sampler 'next-only' built a NextSampleOnly without getSample() -> (point, info), which the miner calls: "
+        "the object its build returns needs both, getSample() -> (point, info) and update(point, info, rho), as "
+        "VerifAI's samplers have them (SamplerRecord.build says what each does)")
+    register_sampler("neither", SamplerRecord(lambda space, feature_space, params: Neither()))
+    with pytest.raises(MiningError, match=r"^sampler 'neither' built a Neither without getSample\(\) -> \(point, "
+                                          r"info\) and update\(point, info, rho\), which the miner calls: "):
+        make_sampler("neither", space, 0)

@@ -127,7 +127,7 @@ def test_a_dagger_checkpoint_of_another_format_is_refused(tmp_path, format_keys,
     assert str(error.value) == _refusal(folder, "the checkpoint of an unfinished DAgger run", "progress.json", found, 2)
 
 
-@pytest.mark.parametrize("format_keys, found", [({"version": 2}, "format 2"), ({}, "no format")])
+@pytest.mark.parametrize("format_keys, found", [({"version": 3}, "format 3"), ({}, "no format")])
 def test_a_regression_folder_of_another_format_is_refused_and_one_of_this_format_resumes(tmp_path, format_keys,
                                                                                           found):
     settings = {"episodes": 4, "seed": 0, "scenarios": ["a"]}
@@ -140,7 +140,7 @@ def test_a_regression_folder_of_another_format_is_refused_and_one_of_this_format
     path.write_text(json.dumps({**record, **format_keys}))
     with pytest.raises(ResumeMismatchError) as error, RunStore(tmp_path, settings) as store:
         store.open()
-    assert str(error.value) == _refusal(tmp_path, "a regression run", "run.json", found, 3)
+    assert str(error.value) == _refusal(tmp_path, "a regression run", "run.json", found, 4)
 
 
 def test_a_regress_report_of_another_schema_version_is_refused(tmp_path):

@@ -20,7 +20,7 @@ from dv2s_gym.mining import monitors
 from dv2s_gym.regress.errors import RegressError
 from scenario_bank.failure_types import FAILURE_TABLE, FailureType, failure_type, register_failure_type
 from scenario_bank.failure_types import unregister_failure_type
-from scenario_bank.plugins import PLUGINS_VARIABLE, forget_plugin, plugin_modules, remember_plugin
+from scenario_bank.plugins import PLUGINS_VARIABLE, code_modules, forget_plugin, plugin_modules, remember_plugin
 from tests.cli_helpers import one_line_error, run
 from tests.regress_call import run_regression
 
@@ -221,6 +221,7 @@ def test_a_policy_registration_remembers_the_module_that_made_it(registries, mon
     assert plugin_modules() == ["my_registrations"]
     forget_plugin("policy 'my_idle'")
     assert plugin_modules() == []  # the product's own registrations and the parent-only ones are no plug-ins
+    assert code_modules() == ["my_registrations"]  # but the code of its sampler and backends is the run's
     registry.register_policy("in_main", lambda **options: (lambda obs: 1))  # this test module's, as a script's
     assert plugin_modules() == [__name__]
 

@@ -11,6 +11,7 @@ from dv2s_gym.cli import main
 from dv2s_gym.regress import ResumeMismatchError
 from regress_call import run_regression
 from policies.registry import PolicyError, load_policy
+from policies.run_identity import resume_fingerprint
 
 SCENARIO = "highway_lead_vehicle_brakes"
 QUICK = {"duration": 2}
@@ -80,25 +81,25 @@ def test_resume_is_refused_when_the_policy_module_changed_under_the_same_spec(tm
     lines = (tmp_path / "out" / "results.jsonl").read_text().splitlines()
     assert len(lines) == 2
     module.write_text(POLICY_MODULE.format(action=4))  # same spec, other code
-    with pytest.raises(ResumeMismatchError, match=r"candidate module resumed_policy_here source \(SHA-256\)") as info:
+    with pytest.raises(ResumeMismatchError, match=r"holds a regression run of resumed_policy_here:make whose policy "
+                                                  r"has changed since \(module resumed_policy_here source \(SHA-256\): "
+                                                  r"run has [0-9a-f]{12}, now [0-9a-f]{12}\)") as info:
         run_regression("resumed_policy_here:make", "rule", **arguments)
     # the folder's reports are the earlier run's: the refusal says so, and leaves them untouched
     assert "its reports (junit.xml, report.html, report.md, report.json) are that run's, not this one's" in str(info.value)
 
 
 def test_resume_is_refused_when_the_checkpoint_changed_under_the_same_path(tmp_path):
-    from dv2s_gym.regress.identity import policy_fingerprint
-
     checkpoint = tmp_path / "model.zip"
     checkpoint.write_bytes(b"one")
-    before = policy_fingerprint(f"ppo:{checkpoint}?device=cpu")
+    before = resume_fingerprint(f"ppo:{checkpoint}?device=cpu")
     checkpoint.write_bytes(b"two")
-    after = policy_fingerprint(f"ppo:{checkpoint}?device=cpu")
+    after = resume_fingerprint(f"ppo:{checkpoint}?device=cpu")
     key = f"checkpoint {checkpoint} (SHA-256)"
     assert before[key] != after[key] and before["options"] == after["options"] == '{"device": "cpu"}'
-    assert policy_fingerprint(str(checkpoint))[key] == after[key]
-    assert policy_fingerprint("rule?action_noise=0.2")["options"] == '{"action_noise": 0.2}'
-    assert any(k.startswith("module policies.rule_based source") for k in policy_fingerprint("rule"))
+    assert resume_fingerprint(str(checkpoint))[key] == after[key]
+    assert resume_fingerprint("rule?action_noise=0.2")["options"] == '{"action_noise": 0.2}'
+    assert any(k.startswith("module policies.rule_based source") for k in resume_fingerprint("rule"))
 
 
 @pytest.mark.slow
@@ -124,18 +125,16 @@ def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, monkeypatch):
-    from dv2s_gym.regress import identity
-
     monkeypatch.chdir(tmp_path)
     (tmp_path / "stealth_cfg.py").write_text("ACTION = 1\n")
     (tmp_path / "helped_policy_here.py").write_text("import stealth_cfg\n" + POLICY_MODULE.format(action=1))
     (tmp_path / "weights.json").write_text('{"w": 1}')
     spec = "helped_policy_here:make?weights=weights.json"
-    before = identity.policy_fingerprint(spec)
+    before = resume_fingerprint(spec)
     assert before["dv2s version"]
     (tmp_path / "stealth_cfg.py").write_text("ACTION = 4\n")  # the helper the module imports changed
     (tmp_path / "weights.json").write_text('{"w": 2}')  # the data file an option names changed
-    after = identity.policy_fingerprint(spec)
+    after = resume_fingerprint(spec)
     changed = sorted(key for key in before.keys() | after.keys() if before.get(key) != after.get(key))
     assert changed == [f"module file {(tmp_path / 'stealth_cfg.py').resolve()} (SHA-256)",
                        "option weights file weights.json (SHA-256)"]

@@ -40,7 +40,7 @@ def test_a_line_of_a_real_run_reads_and_writes_back_byte_for_byte(line):
 
 def test_the_store_reads_a_real_results_file_as_records_and_writes_it_back_unchanged(tmp_path):
     shutil.copy(RESULTS, tmp_path / "results.jsonl")
-    (tmp_path / "run.json").write_text(json.dumps({"schema": "dv2s-regress-run", "version": 3, "settings": SETTINGS}))
+    (tmp_path / "run.json").write_text(json.dumps({"schema": "dv2s-regress-run", "version": 4, "settings": SETTINGS}))
     with (tmp_path / "results.jsonl").open("a") as handle:
         handle.write('{"id": "cut short')  # a run killed mid-line
     done = RunStore(tmp_path, SETTINGS).open()
@@ -61,7 +61,7 @@ def test_a_field_of_the_wrong_kind_is_named_and_the_store_refuses_its_line(tmp_p
         RegressEpisode.from_dict({**data, "steps": "12"})
     with pytest.raises(RecordError, match="regression result field 'role' is missing"):
         RegressEpisode.from_dict({k: v for k, v in data.items() if k != "role"})
-    (tmp_path / "run.json").write_text(json.dumps({"schema": "dv2s-regress-run", "version": 3, "settings": SETTINGS}))
+    (tmp_path / "run.json").write_text(json.dumps({"schema": "dv2s-regress-run", "version": 4, "settings": SETTINGS}))
     (tmp_path / "results.jsonl").write_text(json.dumps({**data, "collided": "yes"}) + "\n" + _lines()[1].decode() + "\n")
     with pytest.raises(RegressError, match=r"line 1 is not a result record \(regression result field 'collided' must "
                                            r"be true or false, not str 'yes'\); the file is damaged"):

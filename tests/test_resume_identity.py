@@ -1,15 +1,19 @@
 """One notion of "the same run" for every resumable run kind: a resume over an edited bank script, other or changed
-plug-ins (their detectors, failure types and sources, the built-ins they replace) or a changed reference driver is
-refused in one line naming what differs and the fix; an unchanged resume resumes.
+plug-ins (their detectors, failure types and sources, the built-ins they replace, the user's modules they load, the
+modules that registered a sampler) or a changed reference driver is refused in one line naming what differs and the
+fix; an unchanged resume resumes.
 
 ``dv2s loop`` is checked in ``tests/test_loop.py`` (its stand-ins live there); ``dv2s regress`` records the same
-code identity among its settings (``tests/test_regress_inputs.py`` and below)."""
+code and bank identities under the same keys and refuses in the same words (``tests/test_regress_inputs.py`` and
+below)."""
 
 from __future__ import annotations
 
 import importlib
 import json
+import re
 import sys
+import types
 import warnings
 
 import pytest
@@ -25,6 +29,7 @@ from policies.training import TrainConfig, run_settings, train
 from scenario_bank.bank import Bank
 from scenario_bank.errors import BuiltInReplacedWarning
 from scenario_bank.named_registry import replaced_built_ins
+from scenario_bank.plugins import check_plugins, plugin_modules
 from scenario_bank.run_identity import BANK_IDENTITY, RunIdentityError, bank_identity
 
 SCENARIO = "highway_lead_vehicle_brakes"
@@ -64,6 +69,30 @@ def plugin(tmp_path, monkeypatch):
     yield path
     module.unregister()
     sys.modules.pop(PLUGIN, None)
+
+
+HELPED = "identity_probe_helped_plugin"
+HELPER = "identity_probe_helper"
+
+
+@pytest.fixture
+def helped_plugin(tmp_path, monkeypatch):
+    """A plug-in module whose detector's limit lives in a helper module of another folder on the Python path (a
+    ``lib/`` of the user's), imported; the helper's path is yielded, the plug-in undone after."""
+    lib, folder = tmp_path / "lib", tmp_path / "plugins"
+    lib.mkdir()
+    folder.mkdir()
+    helper = lib / f"{HELPER}.py"
+    helper.write_text("LIMIT = 1\n", encoding="utf-8")
+    (folder / f"{HELPED}.py").write_text(f"import {HELPER}\n" + PLUGIN_SOURCE.format(limit=f"{HELPER}.LIMIT"),
+                                         encoding="utf-8")
+    monkeypatch.syspath_prepend(str(lib))
+    monkeypatch.syspath_prepend(str(folder))
+    module = importlib.import_module(HELPED)
+    yield helper
+    module.unregister()
+    sys.modules.pop(HELPED, None)
+    sys.modules.pop(HELPER, None)
 
 
 @pytest.fixture
@@ -132,6 +161,107 @@ def test_a_mining_resume_with_a_changed_or_missing_plugin_is_refused_naming_it(p
                                           r"failure types, detectors differ: "):
         _mine_settings_folder(folder)
     importlib.reload(sys.modules[PLUGIN])  # registered again, for the fixture to undo
+
+
+def test_a_plugins_helper_module_in_another_folder_is_fingerprinted_and_its_edit_refuses_a_resume(
+        helped_plugin, tmp_path, monkeypatch):
+    key = f"module file {helped_plugin.resolve()} (SHA-256)"
+    before = code_identity()
+    assert before["plug-in modules"] == [HELPED] and before[key] == run_identity.file_sha256(helped_plugin)
+    folder = recorded_run_folder(tmp_path / "mine", (SCENARIO,), monkeypatch)
+    with pytest.raises(SpaceBuilt):  # unchanged: past every check made before the space is built
+        _mine_settings_folder(folder)
+    helped_plugin.write_text("LIMIT = 1000\n", encoding="utf-8")  # the limit the detector uses, edited
+    assert code_identity()[key] == run_identity.file_sha256(helped_plugin) != before[key]
+    with pytest.raises(MiningError) as error:
+        _mine_settings_folder(folder)
+    assert str(error.value).startswith(f"{folder} holds a mining run made with other code (plug-in modules' source "
+                                       f"differ: {key}: run has {before[key][:12]}, now ")
+
+
+def test_a_loaded_module_the_run_did_not_have_is_not_compared_and_a_recorded_one_is_hashed_again(helped_plugin,
+                                                                                                    tmp_path):
+    """A resume compares the user's files as the run recorded them: one loaded since (a notebook's helper) is left
+    out, one the run had loaded is hashed again even when this process has not loaded it."""
+    recorded_file = tmp_path / "recorded_helper.py"
+    recorded_file.write_text("X = 1\n", encoding="utf-8")
+    recorded_key = f"module file {recorded_file.resolve()} (SHA-256)"
+    now = code_identity()
+    extra = [key for key in now if key.startswith("module file ")]
+    assert f"module file {helped_plugin.resolve()} (SHA-256)" in extra and recorded_key not in now
+    recorded = {CODE_IDENTITY: {**{k: v for k, v in now.items() if k not in extra},
+                                recorded_key: run_identity.file_sha256(recorded_file)}}
+    run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError, now=now)
+    recorded_file.write_text("X = 2\n", encoding="utf-8")
+    with pytest.raises(MiningError, match=f"plug-in modules' source differ: {re.escape(recorded_key)}: run has "):
+        run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError, now=now)
+    recorded_file.unlink()
+    with pytest.raises(MiningError, match=r"\(SHA-256\): run has [0-9a-f]{12}, now missing\)"):
+        run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError, now=now)
+
+
+SAMPLER_SOURCE = '''
+from dv2s_gym.mining.sampling.samplers import SamplerRecord, register_sampler, registered_samplers
+
+UPPER = {upper}
+
+
+def build(space, feature_space, params):
+    return None
+
+
+register_sampler("identity_probe_upper", SamplerRecord(build))
+'''
+
+
+@pytest.fixture
+def sampler_registry(monkeypatch):
+    """The sampler registry as a copy, dropped after the test."""
+    from dv2s_gym.mining.sampling import samplers
+
+    monkeypatch.setattr(samplers, "_REGISTRY", samplers._REGISTRY.copy())
+
+
+def test_a_module_that_registered_a_sampler_is_part_of_the_code_identity_not_of_the_workers_imports(
+        sampler_registry, tmp_path, monkeypatch):
+    module = "identity_probe_sampler"
+    path = tmp_path / f"{module}.py"
+    path.write_text(SAMPLER_SOURCE.format(upper=0.5), encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, module, raising=False)
+    importlib.import_module(module)
+    key = f"module {module} source (SHA-256)"
+    before = code_identity()
+    assert before["plug-in modules"] == [module] and before[key] == run_identity.file_sha256(path)
+    assert plugin_modules() == check_plugins() == []  # the workers are not asked to import it
+    recorded = {CODE_IDENTITY: before}
+    run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError)
+    path.write_text(SAMPLER_SOURCE.format(upper=0.9), encoding="utf-8")  # the sampler edited
+    assert code_identity()[key] == run_identity.file_sha256(path) != before[key]
+    with pytest.raises(MiningError, match=r"^out holds a mining run made with other code \(plug-in modules' source "
+                                          f"differ: {re.escape(key)}: run has "):
+        run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError)
+    sys.modules.pop(module, None)
+
+
+def test_a_sampler_registered_in_main_is_fingerprinted_by_the_scripts_file_and_stays_allowed(
+        sampler_registry, tmp_path, monkeypatch):
+    from dv2s_gym.mining.sampling.samplers import SamplerRecord, register_sampler
+
+    script = tmp_path / "run_mine.py"
+    script.write_text("# the user's script\n", encoding="utf-8")
+    main = types.ModuleType("__main__")
+    main.__file__ = str(script)
+    monkeypatch.setitem(sys.modules, "__main__", main)
+    exec(compile("register_sampler('from_main', SamplerRecord(lambda space, features, params: None))", str(script),
+                 "exec"), {"__name__": "__main__", "register_sampler": register_sampler, "SamplerRecord": SamplerRecord})
+    facts = code_identity()
+    assert facts["plug-in modules"] == ["__main__"] and check_plugins() == []  # allowed for runs with workers
+    assert facts["module __main__ source (SHA-256)"] == run_identity.file_sha256(script)
+    script.write_text("# the user's script, edited\n", encoding="utf-8")
+    assert code_identity()["module __main__ source (SHA-256)"] == run_identity.file_sha256(script)
+    monkeypatch.delattr(main, "__file__")  # python -c, an interactive session: no file to fingerprint
+    assert code_identity()["module __main__ source (SHA-256)"] == "not found"
 
 
 def test_a_mining_resume_after_a_builtin_detector_was_replaced_is_refused(replaced_collision, tmp_path, monkeypatch):
@@ -250,14 +380,26 @@ def test_a_regression_resume_over_an_edited_script_or_a_changed_plugin_is_refuse
                progress=False, clips=False)
     run_regression("keep_lane", **run)
     run_regression("keep_lane", **run)  # unchanged: resumed
+    recorded = json.loads((tmp_path / "regress" / "run.json").read_text(encoding="utf-8"))["settings"]
+    assert recorded[CODE_IDENTITY] == code_identity() and recorded[BANK_IDENTITY] == bank_identity(Bank(bank),
+                                                                                                   [SCENARIO])
     plugin.write_text(PLUGIN_SOURCE.format(limit=2), encoding="utf-8")
-    with pytest.raises(ResumeMismatchError, match=f"module {PLUGIN} source \\(SHA-256\\): run has '"):
+    with pytest.raises(ResumeMismatchError) as error:  # said as every resumable run kind says it
         run_regression("keep_lane", **run)
+    assert str(error.value).startswith(f"{tmp_path / 'regress'} holds a regression run made with other code (plug-in "
+                                       f"modules' source differ: module {PLUGIN} source (SHA-256): run has ")
+    assert str(error.value).endswith("restore the code the run used (dv2s's sources, the plug-in modules DV2S_PLUGINS "
+                                     "names), or start a new --out folder (its reports (junit.xml, report.html, "
+                                     "report.md, report.json) are that run's, not this one's: nothing was written, so "
+                                     "do not read them as this run's verdict)")
     plugin.write_text(PLUGIN_SOURCE.format(limit=1), encoding="utf-8")
     script = bank / SCENARIO / "scenario.scenic"
     script.write_text(script.read_text(encoding="utf-8") + "\n# edited\n", encoding="utf-8")
-    with pytest.raises(ResumeMismatchError, match=f"the bank's script for '{SCENARIO}' \\(SHA-256\\): run has '"):
+    with pytest.raises(ResumeMismatchError) as error:
         run_regression("keep_lane", **run)
+    assert str(error.value).startswith(f"{tmp_path / 'regress'} holds a regression run over other scenario scripts "
+                                       f"(the bank's script for '{SCENARIO}' changed since the run began); restore the "
+                                       "script as the run used it, or start a new --out folder")
 
 
 # --------------------------------------------------------------------------- a DAgger fine-tuning

@@ -21,6 +21,7 @@ from dv2s_gym.pipeline.attempts import GenerationFailure
 from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
 from dv2s_gym.pipeline.llm_config import LLMConfigLike
 from scenario_bank.named_registry import Registry
+from scenario_bank.plugins import registering_module, remember_code
 from scenario_bank.bank import Bank
 from scenario_bank.safety import assert_safe
 
@@ -123,16 +124,19 @@ def register_dra(name: str, backend: DRABackend, overwrite: bool = False, *, rea
     (see :data:`DRABackend`); the description's elements are read from the text it returns. A name registered
     already needs ``overwrite=True``. ``reads_model``: whether the backend calls a model and so reads the model
     settings it is given (``llm_config``; the command line's ``--base-url``, ``--model``, ``--api-key``); a
-    command refuses those options for a backend that does not."""
+    command refuses those options for a backend that does not. The calling module (``__main__`` too) is part of a
+    run's code identity (:func:`scenario_bank.plugins.remember_code`); the workers need nothing of it."""
     _DRA_REGISTRY.register(name, StageBackend(backend, reads_model), overwrite=overwrite)
+    remember_code(f"DRA backend {name!r}", registering_module())
 
 
 def register_sg(name: str, backend: SGBackend, overwrite: bool = False, *, reads_model: bool = True) -> None:
     """Make ``generate(description, backend=name)`` call
     ``backend(description, seed=..., llm_config=..., max_attempts=...)`` (see :data:`SGBackend`);
     the script of the :class:`Generation` it returns must pass the safety check. ``overwrite`` and
-    ``reads_model``: as for :func:`register_dra`."""
+    ``reads_model`` and the calling module: as for :func:`register_dra`."""
     _SG_REGISTRY.register(name, StageBackend(backend, reads_model), overwrite=overwrite)
+    remember_code(f"SG backend {name!r}", registering_module())
 
 
 def reads_model(stage: str, name: str) -> bool:

@@ -39,9 +39,9 @@ from dv2s_gym.regress.report import (
     paired_tables,
 )
 from dv2s_gym.regress.outputs import write_reports
-from dv2s_gym.regress.identity import policy_fingerprint
-from policies.run_identity import code_identity, installed_version
-from dv2s_gym.regress.store import RunStore
+from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, code_identity, installed_version,
+                                   resume_fingerprint)
+from dv2s_gym.regress.store import BASELINE_FINGERPRINT, RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.errors import WorkerError
@@ -57,6 +57,7 @@ from scenario_bank.jail import JailUnavailableError, require_jail
 from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.records import RecordError, RegressEpisode
+from scenario_bank.run_identity import BANK_IDENTITY
 from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, RegressReport, SequentialOutcome
 from policies.card_record import ModelCard
 from policies.registry import PolicySpaceError, load_policy
@@ -372,13 +373,11 @@ def _identity(plan: _Plan, settings: RegressSettings) -> Dict[str, Any]:
         "seed": settings.seed, "env_config": plan.env_config, "sequential": bool(settings.sequential),
         "failure": plan.failure, "stall_seconds": float(settings.stall_seconds),
     }
-    # each scenario's script (scenario_bank.run_identity.bank_identity): a refusal names the scenario whose changed
-    identity.update({f"the bank's script for {name!r} (SHA-256)": script
-                     for name, script in (plan.bank.hashes or {}).items()})
-    for role, spec in (("candidate", plan.candidate), ("baseline", plan.baseline_spec)):
-        if spec is not None:  # what the policy is, not what it is called
-            identity.update({f"{role} {key}": value for key, value in policy_fingerprint(spec).items()})
-    identity.update(code_identity())  # dv2s's sources, the plug-ins, their detectors, the built-ins they replaced
+    # what the policies, the scenarios and the code *are*, checked as every resumable run kind checks them
+    identity[RESUME_FINGERPRINT] = resume_fingerprint(plan.candidate)
+    identity[BASELINE_FINGERPRINT] = resume_fingerprint(plan.baseline_spec) if plan.baseline_spec else None
+    identity[BANK_IDENTITY] = dict(sorted((plan.bank.hashes or {}).items()))
+    identity[CODE_IDENTITY] = code_identity()
     if settings.sequential:  # the stopping point depends on these
         identity.update(margin=float(settings.margin), alpha=float(settings.alpha), batch=plan.batch)
     return identity

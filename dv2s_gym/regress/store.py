@@ -10,7 +10,12 @@ transient); the newer line replaces the older one.
 
 ``run.json`` holds the settings that decide which episodes the run has and what they
 produce (policies, bank version, scenarios, episodes, seed, env config, ...). A folder
-holding another run's settings is refused, naming what differs.
+holding another run's settings is refused, naming what differs. Beside them it records, under their own keys, what
+every resumable run kind records and checks the same way: the policies' fingerprints
+(:data:`~policies.run_identity.RESUME_FINGERPRINT` for the candidate, :data:`BASELINE_FINGERPRINT`;
+:func:`~policies.run_identity.check_policy_unchanged`), the scenarios' scripts
+(:data:`~scenario_bank.run_identity.BANK_IDENTITY`; :func:`~scenario_bank.run_identity.check_bank_unchanged`) and the
+code (:data:`~policies.run_identity.CODE_IDENTITY`; :func:`~policies.run_identity.check_code_unchanged`).
 """
 
 from __future__ import annotations
@@ -23,16 +28,23 @@ from typing import Any, Dict, Mapping, Optional, Tuple, Union
 from dv2s_gym.regress.errors import RegressError, ResumeMismatchError
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.records import RecordError, RegressEpisode
-from scenario_bank.run_identity import check_format, check_identity, check_run_kind, record_format
+from policies.run_identity import CODE_IDENTITY, RESUME_FINGERPRINT, check_code_unchanged, check_policy_unchanged
+from scenario_bank.run_identity import (BANK_IDENTITY, check_bank_unchanged, check_format, check_identity,
+                                        check_run_kind, record_format)
 
-__all__ = ["RunStore", "RUN_FILE", "RESULTS_FILE", "TRACES_DIR", "describe_differences"]
+__all__ = ["RunStore", "RUN_FILE", "RESULTS_FILE", "TRACES_DIR", "BASELINE_FINGERPRINT", "describe_differences"]
 
 RUN_FILE = "run.json"
 RESULTS_FILE = "results.jsonl"
 TRACES_DIR = "traces"
 _RUN_SCHEMA = "dv2s-regress-run"
-_RUN_VERSION = 3
+_RUN_VERSION = 4
 """The format of ``run.json`` (bumped when its fields change; a run folder of another format is refused)."""
+BASELINE_FINGERPRINT = "baseline_fingerprint"
+"""The key under which ``run.json`` holds the baseline policy's :func:`~policies.run_identity.resume_fingerprint`
+(``None`` without a baseline policy)."""
+_CHECKED_APART = (RESUME_FINGERPRINT, BASELINE_FINGERPRINT, BANK_IDENTITY, CODE_IDENTITY)
+"""The keys of the run's identity checked by their own checks, not compared as settings."""
 
 Key = Tuple[str, str]  # (episode id, role)
 
@@ -98,16 +110,37 @@ class RunStore:
         return self._read()
 
     def _check_same_run(self, there: Dict[str, Any]) -> None:
-        """Refuse a folder whose ``run.json`` holds other settings, naming each difference and the fix."""
+        """Refuse a folder whose ``run.json`` holds other settings, naming each difference and the fix; then
+        other policies, scenario scripts or code than the run's, as every resumable run kind does (each check for
+        a key of :data:`_CHECKED_APART` this run's identity holds)."""
         if there == self.settings:
             return
         stale = [n for n in ("junit.xml", "report.html", "report.md", "report.json") if (self.root / n).is_file()]
         warning = (f"its reports ({', '.join(stale)}) are that run's, not this one's: nothing was written, so do "
-                   "not read them as this run's verdict; " if stale else "")
-        check_identity(there, self.settings, sorted(set(there) | set(self.settings)),
+                   "not read them as this run's verdict" if stale else "")
+        check_identity(there, self.settings, sorted((set(there) | set(self.settings)) - set(_CHECKED_APART)),
                        run=f"{self.root} holds a regression run", error=ResumeMismatchError,
-                       fix=f"{warning}rerun with the same settings to resume it, or choose another --out (or delete "
-                           f"{self.root}) for a new run")
+                       fix=f"{warning + '; ' if warning else ''}rerun with the same settings to resume it, or choose "
+                           f"another --out (or delete {self.root}) for a new run")
+        try:
+            self._check_what_the_run_ran(there)
+        except ResumeMismatchError as error:
+            if not warning:
+                raise
+            raise ResumeMismatchError(f"{error} ({warning})", error.differences) from None
+
+    def _check_what_the_run_ran(self, there: Dict[str, Any]) -> None:
+        """The policies, scenario scripts and code of the run in the folder, checked (:data:`_CHECKED_APART`)."""
+        for key, role in ((RESUME_FINGERPRINT, "policy"), (BASELINE_FINGERPRINT, "baseline")):
+            spec = self.settings.get("candidate" if role == "policy" else "baseline")
+            if key in self.settings and spec is not None:
+                check_policy_unchanged(there, spec, folder=self.root, run="regression run",
+                                       error=ResumeMismatchError, key=key, role=role)
+        if CODE_IDENTITY in self.settings:
+            check_code_unchanged(there, run=f"{self.root} holds a regression run", error=ResumeMismatchError)
+        if BANK_IDENTITY in self.settings:
+            check_bank_unchanged(there.get(BANK_IDENTITY), self.settings[BANK_IDENTITY],
+                                 run=f"{self.root} holds a regression run", error=ResumeMismatchError)
 
     def _read(self) -> Dict[Key, RegressEpisode]:
         done: Dict[Key, RegressEpisode] = {}

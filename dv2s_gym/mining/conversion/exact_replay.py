@@ -27,8 +27,7 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
 from dv2s_gym.mining.conversion.scenic_values import read_support, support_contains, support_text
 from dv2s_gym.mining.conversion.scene_draws import inline_draws
-from dv2s_gym.regress import identity
-from policies.run_identity import checkpoint_path, installed_version
+from policies.run_identity import checkpoint_path, dv2s_sources_sha256, installed_version
 from envs.trace import TRACE_VERSION
 from pathlib import Path
 from scenario_bank.atomic import file_sha256
@@ -157,7 +156,7 @@ def replay_versions(policy: Any) -> Dict[str, Any]:
     checkpoint a policy spec names (``dv2s-ppo``, ``model.zip``, ``ppo:PATH``, a folder), ``None`` for a
     driver, a ``module:attribute`` or a policy object."""
     return {"policy_sha256": _checkpoint_sha256(policy), "dv2s_gym_version": installed_version(),
-            "dv2s_sources_sha256": identity.dv2s_sources_sha256(), "trace_version": TRACE_VERSION}
+            "dv2s_sources_sha256": dv2s_sources_sha256(), "trace_version": TRACE_VERSION}
 
 
 def _checkpoint_sha256(policy: Any) -> Optional[str]:

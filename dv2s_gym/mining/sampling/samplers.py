@@ -56,10 +56,11 @@ import numpy as np
 from dv2s_gym.mining.sampling.checkpoint_mac import seal, unseal
 from dv2s_gym.mining.errors import MiningError
 from scenario_bank.named_registry import Registry
+from scenario_bank.plugins import registering_module, remember_code
 
 __all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "NOVELTY",
            "SceneSampler", "SamplerRecord", "default_feedback", "make_sampler", "sampler_params", "is_adaptive",
-           "is_uniform", "register_sampler", "registered_samplers", "UNSEALED"]
+           "is_uniform", "register_sampler", "registered_samplers", "UNSEALED", "SAMPLER_METHODS"]
 
 
 @dataclass(frozen=True)
@@ -67,8 +68,11 @@ class SamplerRecord:
     """One scene sampler: how it is built and what a mining run needs to know of it."""
 
     build: Callable[[Any, Any, Any], Any]
-    """``build(space, feature_space, params)``: the VerifAI-style sampler (``nextSample``, ``update``) over the
-    space; called with the sampler's seed set on Python's and NumPy's global generators."""
+    """``build(space, feature_space, params)``: the sampler over the space, an object with the two methods the miner
+    calls, as VerifAI's samplers have them: ``getSample() -> (point, info)`` (the next point of the feature space and
+    what the sampler wants back with its outcome) and ``update(point, info, rho)`` (that point's robustness ``rho``,
+    below 0 a failure; a sampler that does not learn ignores it); called with the sampler's seed set on Python's and
+    NumPy's global generators. :func:`make_sampler` refuses a built object without them."""
     params: Callable[[Dict[str, Any]], Any] = lambda options: None
     """``params(options)``: the checked settings ``build`` gets (the option names are checked before)."""
     options: Tuple[str, ...] = ()
@@ -126,8 +130,10 @@ def is_uniform(name: str) -> bool:
 
 def register_sampler(name: str, record: SamplerRecord, overwrite: bool = False) -> None:
     """Make ``make_sampler(name, ...)`` (and ``--sampler name``) build ``record``'s sampler; a name registered
-    already needs ``overwrite=True``."""
+    already needs ``overwrite=True``. The calling module (``__main__`` too) is part of a run's code identity
+    (:func:`scenario_bank.plugins.remember_code`); the workers need nothing of it."""
     _REGISTRY.register(name, record, overwrite=overwrite)
+    remember_code(f"sampler {name!r}", registering_module())
 
 
 def registered_samplers() -> List[str]:
@@ -409,7 +415,22 @@ def make_sampler(name: str, space: Any, seed: int, options: Optional[Dict[str, A
     finally:
         random.setstate(saved_py)
         np.random.set_state(saved_np)
+    _check_protocol(name, inner)
     return SceneSampler(name, inner, seed)
+
+
+SAMPLER_METHODS = (("getSample", "getSample() -> (point, info)"), ("update", "update(point, info, rho)"))
+"""The methods a built sampler must have (:attr:`SamplerRecord.build`), with how the miner calls them."""
+
+
+def _check_protocol(name: str, sampler: Any) -> None:
+    """Refuse a built sampler that lacks a method the miner calls, naming the sampler, the method and the fix."""
+    missing = [call for method, call in SAMPLER_METHODS if not callable(getattr(sampler, method, None))]
+    if missing:
+        raise MiningError(
+            f"sampler {name!r} built a {type(sampler).__name__} without {' and '.join(missing)}, which the miner "
+            "calls: the object its build returns needs both, getSample() -> (point, info) and update(point, info, "
+            "rho), as VerifAI's samplers have them (SamplerRecord.build says what each does)")
 
 
 def _scenario_dimensions(space: Any, feature_space: Any) -> list:
