@@ -357,7 +357,7 @@ def test_card_statistics_agree_with_the_regression_stats_module():
     from dv2s_gym.regress.stats import PairedTable, mcnemar_exact, wilson_interval
     from policies.model_card import compare_paired, rate
 
-    assert (rate(7, 40)["lo"], rate(7, 40)["hi"]) == pytest.approx(wilson_interval(7, 40))
+    assert (rate(7, 40).low, rate(7, 40).high) == pytest.approx(wilson_interval(7, 40))
     candidate = "CSSSSSSSS-OSSSSSSSSS" * 2
     baseline = "CCCCCSSSCCSSSSSSSSS-" * 2
     comparison = compare_paired(candidate, baseline, "collision")
