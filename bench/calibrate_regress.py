@@ -210,12 +210,12 @@ def gate(reps: int, rng: np.random.Generator) -> None:
         assert [per[name].verdict is Verdict.FAIL for name in names] == list(scenario_fail[r])
     print(f"\n== the gate (compare_scenarios: every scenario a test, pooled test in the family), {BANK_SCENARIOS} "
           f"scenarios with failure rates 2-25 % (rho {DEFAULT_CORRELATION:g}), {reps} repetitions each")
-    print(f"   planned episodes per scenario for --mde {planned['mde']:g} --power {planned['power']:g}: "
-          f"{planned['episodes']} ({planned['assumption']})")
+    print(f"   planned episodes per scenario for --mde {planned.mde:g} --power {planned.power:g}: "
+          f"{planned.episodes} ({planned.assumption})")
     sized = plan_episodes(names, mde=0.2, power=0.8)
-    print(f"   planned for --mde 0.2 --power 0.8: {sized['episodes']} per scenario")
-    designs = [(planned["episodes"], "default (planned for --mde 0.3)"),
-               (sized["episodes"], "power-sized for --mde 0.2"), (20, "20 per scenario (the former default)")]
+    print(f"   planned for --mde 0.2 --power 0.8: {sized.episodes} per scenario")
+    designs = [(planned.episodes, "default (planned for --mde 0.3)"),
+               (sized.episodes, "power-sized for --mde 0.2"), (20, "20 per scenario (the former default)")]
     for n, label in designs:
         print(f"  {n} episodes per scenario, {label}:")
         cases = [
@@ -243,12 +243,12 @@ def gate(reps: int, rng: np.random.Generator) -> None:
     print("  power the default run states (planning model; per scenario at the Bonferroni level, pooled at its share):")
     for n, _ in designs:
         power = run_power({name: n for name in names}, {}, margin=DEFAULT_MARGIN, alpha=DEFAULT_ALPHA)
-        one, pooled = power["per_scenario"][names[0]], power["pooled"]
+        one, pooled = power.per_scenario[names[0]], power.pooled
         at20 = run_power({name: n for name in names}, {}, margin=DEFAULT_MARGIN, alpha=DEFAULT_ALPHA, mde=0.2)
-        print(f"    {n} per scenario: one scenario at the margin {one['at_margin']:.4f}, at +30 pp {one['at_mde']:.3f}, "
-              f"at +20 pp {at20['per_scenario'][names[0]]['at_mde']:.3f}, "
-              f"80 % at +{100 * one['detectable']:.1f} pp; pooled ({pooled['n']} pairs) at the margin "
-              f"{pooled['at_margin']:.3f}, 80 % at +{100 * pooled['detectable']:.1f} pp")
+        print(f"    {n} per scenario: one scenario at the margin {one.at_margin:.4f}, at +30 pp {one.at_mde:.3f}, "
+              f"at +20 pp {at20.per_scenario[names[0]].at_mde:.3f}, "
+              f"80 % at +{100 * one.detectable:.1f} pp; pooled ({pooled.n} pairs) at the margin "
+              f"{pooled.at_margin:.3f}, 80 % at +{100 * pooled.detectable:.1f} pp")
 
 
 def gate_sequential(reps: int, rng: np.random.Generator, looks: int = 5) -> None:
@@ -256,7 +256,7 @@ def gate_sequential(reps: int, rng: np.random.Generator, looks: int = 5) -> None
     seeds by ``SequentialTest`` (spending the pooled share, alpha/2; stopping only for FAIL), then the family
     at the stop with the pooled member decided by the sequential test."""
     names = [f"s{i}" for i in range(BANK_SCENARIOS)]
-    n = plan_episodes(names)["episodes"]
+    n = plan_episodes(names).episodes
     rates = bank_rates()
     print(f"\n== the gate with --sequential: {BANK_SCENARIOS} scenarios x {n} seeds, {looks} looks, {reps} repetitions")
     for text, changes, named in (("identical policies: FAIL", {}, None),

@@ -7,8 +7,10 @@ trained policy: the registry (its ``algorithm`` picks the loader), fine-tuning (
 ``hyperparameters``), the closed loop (its ``fine_tune`` section) and the regression report (the card of each
 policy). Like the records of :mod:`scenario_bank.records`, :meth:`~ModelCard.from_dict` checks every field it
 knows and :meth:`~ModelCard.to_dict` gives back the JSON object the file holds, byte for byte once written with
-sorted keys. The sections that are free-form JSON (hyperparameters, env config, bank, sampler, training,
-evaluation, versions) stay JSON objects.
+sorted keys. The held-out ``evaluation`` is a :class:`CardEvaluation`, each policy's part of it a
+:class:`CardResults` with its :class:`CardOverall`; the sections that are free-form JSON (hyperparameters, env
+config, bank, sampler, training, versions) and the evaluation's leaves (the rates ``{"k", "n", "rate", "lo",
+"hi"}``, the per-scenario rates and the paired ``comparisons``) stay JSON objects.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
 from scenario_bank.records import JsonRecord
 
-__all__ = ["FineTuneMethod", "FINE_TUNE_METHODS", "FineTune", "ModelCard"]
+__all__ = ["FineTuneMethod", "FINE_TUNE_METHODS", "FineTune", "CardOverall", "CardResults", "CardEvaluation",
+           "ModelCard"]
 
 
 class FineTuneMethod(str, enum.Enum):
@@ -89,13 +92,96 @@ class FineTune(JsonRecord):
 
 
 @dataclass(frozen=True, eq=False)
+class CardOverall(JsonRecord):
+    """A policy's overall results in a card's evaluation: the ``collision``, ``success``, ``off_road`` and
+    ``failure`` rates (each ``{"k", "n", "rate", "lo", "hi"}``, episodes with an error left out), the ``episodes``
+    run, the ``errors`` among them and the ``mean_return`` and ``mean_speed`` of the others."""
+
+    collision: Optional[Mapping[str, Any]] = None
+    episodes: Optional[int] = None
+    errors: Optional[int] = None
+    failure: Optional[Mapping[str, Any]] = None
+    mean_return: Optional[float] = None
+    mean_speed: Optional[float] = None
+    off_road: Optional[Mapping[str, Any]] = None
+    success: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    # sorted, as the card file is written
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "collision": "object", "episodes": "int", "errors": "int", "failure": "object", "mean_return": "number",
+        "mean_speed": "number", "off_road": "object", "success": "object"}
+    _WHAT: ClassVar[str] = "model card results overall"
+
+    def measure(self, name: str) -> Mapping[str, Any]:
+        """The rate of measure ``name`` (``"collision"``, ``"success"``, ``"off_road"`` or ``"failure"``)."""
+        return {"collision": self.collision, "success": self.success, "off_road": self.off_road,
+                "failure": self.failure}[name]
+
+
+@dataclass(frozen=True, eq=False)
+class CardResults(JsonRecord):
+    """One policy's results in a card's evaluation: ``overall`` (:class:`CardOverall`), the rates of each scenario
+    (``per_scenario``: ``{name: {measure: rate}}``) and every episode's outcome code per scenario (``outcomes``,
+    :func:`policies.model_card.outcome_code`)."""
+
+    outcomes: Optional[Mapping[str, str]] = None
+    overall: Optional[CardOverall] = None
+    per_scenario: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    # sorted, as the card file is written
+    _KINDS: ClassVar[Dict[str, str]] = {"outcomes": "object", "overall": "object", "per_scenario": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {"overall": CardOverall}
+    _WHAT: ClassVar[str] = "model card results"
+
+
+@dataclass(frozen=True, eq=False)
+class CardEvaluation(JsonRecord):
+    """A card's held-out ``evaluation`` (:func:`policies.model_card.evaluation_section`): the ``confidence`` and
+    ``interval`` of its rates, the ``alpha`` of its tests, the ``candidate`` label, the episodes
+    (``episodes_total``: the ``scenarios`` x ``seeds_per_scenario`` seeds from ``seed_base``), each label's policy
+    ``specs``, its :class:`CardResults` (``policies``), the paired ``comparisons`` of the candidate against every
+    other label (``{label: {measure: comparison}}``) and the ``summary`` sentences."""
+
+    alpha: Optional[float] = None
+    candidate: Optional[str] = None
+    comparisons: Optional[Mapping[str, Any]] = None
+    confidence: Optional[float] = None
+    episodes_total: Optional[int] = None
+    interval: Optional[str] = None
+    policies: Optional[Mapping[str, CardResults]] = None
+    scenarios: Optional[Tuple[str, ...]] = None
+    seed_base: Optional[int] = None
+    seeds_per_scenario: Optional[int] = None
+    specs: Optional[Mapping[str, str]] = None
+    summary: Optional[Tuple[str, ...]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    # sorted, as the card file is written
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "alpha": "number", "candidate": "str", "comparisons": "object", "confidence": "number",
+        "episodes_total": "int", "interval": "str", "policies": "object", "scenarios": "strings",
+        "seed_base": "int", "seeds_per_scenario": "int", "specs": "object", "summary": "strings"}
+    _ITEMS: ClassVar[Dict[str, type]] = {"policies": CardResults}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios", "summary")
+    _WHAT: ClassVar[str] = "model card evaluation"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"seed_base", "seeds_per_scenario"})
+
+
+@dataclass(frozen=True, eq=False)
 class ModelCard(JsonRecord):
     """A checkpoint's model card (``model_card.json``): its ``name`` and ``description``, the ``algorithm``
     (``ppo``, ``dqn``, ``sac``, ...) and ``policy`` network, the ``hyperparameters``, the ``env_id`` and
     ``env_config`` it was trained in and its ``observation_space``/``action_space``, the ``bank`` version and
     scenarios, the scenario ``sampler``, the ``training`` run (command, steps, seed, wall time, segments), the
-    library ``versions``, the held-out ``evaluation`` (``null`` when it was interrupted, absent when skipped;
-    see :mod:`policies.model_card`) and, for a fine-tuned model, its ``fine_tune`` section (:class:`FineTune`).
+    library ``versions``, the held-out ``evaluation`` (a :class:`CardEvaluation`; ``null`` when it was
+    interrupted, absent when skipped; see :mod:`policies.model_card`) and, for a fine-tuned model, its ``fine_tune`` section (:class:`FineTune`).
 
     A checkpoint without a card reads as the empty card (every field ``None``, :attr:`exists` false)."""
 
@@ -106,7 +192,7 @@ class ModelCard(JsonRecord):
     description: Optional[str] = None
     env_config: Optional[Mapping[str, Any]] = None
     env_id: Optional[str] = None
-    evaluation: Optional[Mapping[str, Any]] = None
+    evaluation: Optional[CardEvaluation] = None
     fine_tune: Optional[FineTune] = None
     hyperparameters: Optional[Mapping[str, Any]] = None
     name: Optional[str] = None
@@ -124,7 +210,7 @@ class ModelCard(JsonRecord):
         "env_config": "object", "env_id": "str", "evaluation": "object", "fine_tune": "object",
         "hyperparameters": "object", "name": "str", "observation_space": "str", "policy": "str",
         "sampler": "object", "training": "object", "versions": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"fine_tune": FineTune}
+    _NESTED: ClassVar[Dict[str, type]] = {"fine_tune": FineTune, "evaluation": CardEvaluation}
     _WHAT: ClassVar[str] = "model card"
 
     @property

@@ -49,7 +49,7 @@ from policies.state_driver import SLOWER
 from policies.dagger_config import DAGGER_DEFAULTS, DaggerConfig
 from policies.training import (ScenarioSchedule, TrainConfig, TrainEnvSpec, TrainingError, check_source_observation,
                                close_vec_env, fine_tune_scenarios, make_vec_env, resolve_checkpoint)
-from policies.card_record import FineTuneMethod, ModelCard
+from policies.card_record import FineTune, FineTuneMethod, ModelCard
 from policies.model_card import write_card
 from policies.registry import load_policy, read_model_card
 from scenario_bank.atomic import atomic_path
@@ -141,6 +141,11 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def _as_json(value: Any) -> Any:
+    """``value`` as the JSON it is written as (tuples as lists; a value JSON does not know is refused)."""
+    return json.loads(json.dumps(value))
 
 
 def _with_labels(env: gym.Env, seed: int, stream: int, reference: str) -> gym.Env:
@@ -455,21 +460,22 @@ class _DaggerRun:
 
     def _card(self, wall: float, agreements: Dict[str, Any]) -> ModelCard:
         c, d, steps = self.config, self.dagger, self.config.steps
-        card = {k: v for k, v in self.source_card.to_dict().items() if k != "evaluation"}
-        card["env_config"] = dict(self.env_config)
-        card["sampler"] = {"mode": "weighted", "weights": self.probabilities}
-        card["training"] = {**dict(self.source_card.training or {}), "command": "dv2s loop --fine-tune-method dagger",
-                            "steps": int(steps), "n_envs": c.n_envs, "seed": int(c.seed), "wall_time_s": round(wall, 1),
-                            "steps_per_s": round(steps / wall, 1) if wall > 0 else None, "segments": []}
-        card["fine_tune"] = {"method": FineTuneMethod.DAGGER.value, "source": str(self.spec), "source_checkpoint": str(self.source),
-                             "steps": int(steps), "weights": self.probabilities,
-                             "learning_rate": float(d.learning_rate), "reference": d.reference,
-                             "iterations": d.iterations, "beta": float(d.beta), "beta_decay": float(d.beta_decay),
-                             "epochs": d.epochs, "batch_size": d.batch_size, "slower_weight": float(d.slower_weight),
-                             "disagreement_weight": float(d.disagreement_weight),
-                             "history": self.history, "agreement": agreements, "resumed": self.resumes}
-        card["description"] = (f"Fine-tuned from {self.spec} by DAgger toward the {d.reference} driver: {steps} "
-                               f"labelled env steps in {d.iterations} iterations on {len(self.scenarios)} scenarios "
-                               "with weighted sampling (see fine_tune).")
-        card["name"] = self.out.name
-        return ModelCard.from_dict(json.loads(json.dumps(card)))
+        source = self.source_card
+        training = {**dict(source.training or {}), "command": "dv2s loop --fine-tune-method dagger",
+                    "steps": int(steps), "n_envs": c.n_envs, "seed": int(c.seed), "wall_time_s": round(wall, 1),
+                    "steps_per_s": round(steps / wall, 1) if wall > 0 else None, "segments": []}
+        fine_tune = FineTune.from_dict(_as_json({
+            "method": FineTuneMethod.DAGGER.value, "source": str(self.spec), "source_checkpoint": str(self.source),
+            "steps": int(steps), "weights": self.probabilities, "learning_rate": float(d.learning_rate),
+            "reference": d.reference, "iterations": d.iterations, "beta": float(d.beta),
+            "beta_decay": float(d.beta_decay), "epochs": d.epochs, "batch_size": d.batch_size,
+            "slower_weight": float(d.slower_weight), "disagreement_weight": float(d.disagreement_weight),
+            "history": self.history, "agreement": agreements, "resumed": self.resumes}))
+        description = (f"Fine-tuned from {self.spec} by DAgger toward the {d.reference} driver: {steps} "
+                       f"labelled env steps in {d.iterations} iterations on {len(self.scenarios)} scenarios "
+                       "with weighted sampling (see fine_tune).")
+        return source.replace(
+            evaluation=None, null_fields=(source.null_fields or frozenset()) - {"evaluation"},
+            env_config=_as_json(dict(self.env_config)),
+            sampler=_as_json({"mode": "weighted", "weights": self.probabilities}), training=_as_json(training),
+            fine_tune=fine_tune, description=description, name=self.out.name)

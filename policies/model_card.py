@@ -35,7 +35,7 @@ import time
 from tqdm import tqdm
 
 from envs.errors import DV2SError
-from policies.card_record import ModelCard
+from policies.card_record import CardEvaluation, CardOverall, CardResults, ModelCard
 from policies.evaluation import EpisodeResult, evaluate
 from policies.stats import Rate, mcnemar_p
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
@@ -130,7 +130,7 @@ def _rates_of(codes: str, confidence: float) -> Dict[str, Any]:
             for measure in MEASURES}
 
 
-def summarize_results(results: Sequence[EpisodeResult], confidence: float = 0.95) -> Dict[str, Any]:
+def summarize_results(results: Sequence[EpisodeResult], confidence: float = 0.95) -> CardResults:
     """Overall and per-scenario rates of ``results`` plus every episode's outcome code.
 
     Episodes that ended in an error are excluded from the rates and counted under ``errors``.
@@ -140,17 +140,12 @@ def summarize_results(results: Sequence[EpisodeResult], confidence: float = 0.95
         outcomes[result.scenario] = outcomes.get(result.scenario, "") + outcome_code(result)
     every = "".join(outcomes[name] for name in sorted(outcomes))
     valid = [r for r in results if r.error is None]
-    return {
-        "overall": {
-            **_rates_of(every, confidence),
-            "episodes": len(results),
-            "errors": every.count("E"),
-            "mean_return": sum(r.episode_return for r in valid) / len(valid) if valid else 0.0,
-            "mean_speed": sum(r.mean_speed for r in valid) / len(valid) if valid else 0.0,
-        },
-        "per_scenario": {name: _rates_of(outcomes[name], confidence) for name in sorted(outcomes)},
-        "outcomes": {name: outcomes[name] for name in sorted(outcomes)},
-    }
+    overall = CardOverall(**_rates_of(every, confidence), episodes=len(results), errors=every.count("E"),
+                          mean_return=sum(r.episode_return for r in valid) / len(valid) if valid else 0.0,
+                          mean_speed=sum(r.mean_speed for r in valid) / len(valid) if valid else 0.0)
+    return CardResults(overall=overall,
+                       per_scenario={name: _rates_of(outcomes[name], confidence) for name in sorted(outcomes)},
+                       outcomes={name: outcomes[name] for name in sorted(outcomes)})
 
 
 def compare_paired(candidate_codes: str, baseline_codes: str, measure: str = "collision") -> Dict[str, Any]:
@@ -190,52 +185,41 @@ def compare_paired(candidate_codes: str, baseline_codes: str, measure: str = "co
 def evaluation_section(results: Mapping[str, Sequence[EpisodeResult]], episodes: Sequence[Tuple[str, int]],
                        candidate: str = "policy", confidence: float = 0.95, alpha: float = 0.05,
                        seed_base: Optional[int] = None, seeds: Optional[int] = None,
-                       specs: Optional[Mapping[str, str]] = None) -> Dict[str, Any]:
+                       specs: Optional[Mapping[str, str]] = None) -> CardEvaluation:
     """The card's ``evaluation``: rates per policy, paired comparisons of ``candidate``
     against every other label, and the summary sentences."""
     episodes = [(str(s), int(seed)) for s, seed in episodes]
     for label, rows in results.items():
         if [(r.scenario, r.seed) for r in rows] != episodes:
             raise ModelCardError(f"results of {label!r} are not the card's episodes in order")
-    section: Dict[str, Any] = {
-        "confidence": confidence,
-        "interval": "wilson",
-        "alpha": alpha,
-        "candidate": candidate,
-        "episodes_total": len(episodes),
-        "scenarios": sorted({s for s, _ in episodes}),
-        "seed_base": seed_base,
-        "seeds_per_scenario": seeds,
-        "specs": dict(specs or {}),
-        "policies": {label: summarize_results(rows, confidence) for label, rows in results.items()},
-    }
-    codes = {label: "".join(data["outcomes"][name] for name in sorted(data["outcomes"]))
-             for label, data in section["policies"].items()}
-    section["comparisons"] = {
-        label: {measure: compare_paired(codes[candidate], codes[label], measure) for measure in MEASURES}
-        for label in results if label != candidate
-    }
-    section["summary"] = summary_sentences(section)
-    return section
+    policies = {label: summarize_results(rows, confidence) for label, rows in results.items()}
+    codes = {label: "".join(data.outcomes[name] for name in sorted(data.outcomes)) for label, data in policies.items()}
+    section = CardEvaluation(
+        confidence=confidence, interval="wilson", alpha=alpha, candidate=candidate, episodes_total=len(episodes),
+        scenarios=tuple(sorted({s for s, _ in episodes})), seed_base=seed_base, seeds_per_scenario=seeds,
+        specs=dict(specs or {}), policies=policies,
+        comparisons={label: {measure: compare_paired(codes[candidate], codes[label], measure) for measure in MEASURES}
+                     for label in results if label != candidate})
+    return section.replace(summary=tuple(summary_sentences(section)))
 
 
 def _fmt(r: Mapping[str, Any]) -> str:
     return _card_rate(r).text(3, counts=False)
 
 
-def summary_sentences(section: Mapping[str, Any]) -> List[str]:
+def summary_sentences(section: CardEvaluation) -> List[str]:
     """Plain sentences: for each baseline and measure whether the candidate is significantly
     better, significantly worse, or not distinguishable, and the scenarios where it is worse."""
-    candidate = section["candidate"]
-    alpha = section.get("alpha", 0.05)
-    mine = section["policies"][candidate]
+    candidate = section.candidate
+    alpha = section.alpha if section.alpha is not None else 0.05
+    mine = section.policies[candidate]
     sentences = []
-    for label, comparisons in section["comparisons"].items():
-        theirs = section["policies"][label]
+    for label, comparisons in (section.comparisons or {}).items():
+        theirs = section.policies[label]
         for measure in ("collision", "success", "failure"):
             c = comparisons[measure]
             lower_better = _LOWER_IS_BETTER[measure]
-            ours, base = _fmt(mine["overall"][measure]), _fmt(theirs["overall"][measure])
+            ours, base = _fmt(mine.overall.measure(measure)), _fmt(theirs.overall.measure(measure))
             p_better = c["p_candidate_better"]
             worse_count = c["table"]["candidate_only"] if lower_better else c["table"]["baseline_only"]
             better_count = c["table"]["baseline_only"] if lower_better else c["table"]["candidate_only"]
@@ -250,8 +234,8 @@ def summary_sentences(section: Mapping[str, Any]) -> List[str]:
                 f"(paired exact McNemar, {better_count} episodes better, {worse_count} worse, "
                 f"one-sided p={p_better:.3g}, two-sided p={c['p_two_sided']:.3g}).")
         worse = []
-        for name, rates in mine["per_scenario"].items():
-            base_rates = theirs["per_scenario"][name]
+        for name, rates in mine.per_scenario.items():
+            base_rates = theirs.per_scenario[name]
             if rates["collision"]["k"] > base_rates["collision"]["k"]:
                 worse.append(f"{name} ({rates['collision']['k']}/{rates['collision']['n']} collisions "
                              f"against {base_rates['collision']['k']}/{base_rates['collision']['n']})")
@@ -334,32 +318,37 @@ def render_markdown(card: ModelCard) -> str:
         lines += ["## Evaluation", "",
                   "**Not evaluated: the held-out evaluation was interrupted before it finished.** Complete it with "
                   f"`{resume}`: the trained model is kept and only the evaluation runs.", ""]
-    if evaluation:
-        confidence = evaluation.get("confidence", 0.95)
-        lines += [
-            "## Evaluation", "",
-            f"{evaluation['episodes_total']} held-out episodes: {len(evaluation['scenarios'])} scenarios x "
-            f"seeds {evaluation.get('seed_base')}..{(evaluation.get('seed_base') or 0) + (evaluation.get('seeds_per_scenario') or 0) - 1}"
-            f" (never used in training). Rates with Wilson {confidence:.0%} intervals.", "",
-            "| policy | collision | success | off-road | failure |", "|---|---|---|---|---|",
-        ]
-        labels = [evaluation["candidate"]] + sorted(set(evaluation["policies"]) - {evaluation["candidate"]})
-        for label in labels:
-            o = evaluation["policies"][label]["overall"]
-            lines.append(f"| {label} | {_rate_cell(o['collision'])} | {_rate_cell(o['success'])} | "
-                         f"{_rate_cell(o['off_road'])} | {_rate_cell(o['failure'])} |")
-        lines += ["", "### Summary", ""] + [f"- {s}" for s in evaluation.get("summary", [])]
-        lines += ["", "### Per scenario (collision rate)", "",
-                  "| scenario | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
-        for name in evaluation["scenarios"]:
-            cells = [_rate_cell(evaluation["policies"][label]["per_scenario"][name]["collision"]) for label in labels]
-            lines.append(f"| {name} | " + " | ".join(cells) + " |")
-        lines += ["", "### Per scenario (success rate)", "",
-                  "| scenario | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
-        for name in evaluation["scenarios"]:
-            cells = [_rate_cell(evaluation["policies"][label]["per_scenario"][name]["success"]) for label in labels]
-            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if evaluation is not None and evaluation.to_dict():
+        lines += _evaluation_lines(evaluation)
     return "\n".join(lines) + "\n"
+
+
+def _evaluation_lines(evaluation: CardEvaluation) -> List[str]:
+    """The rendering's evaluation: the overall rates per policy, the summary and the per-scenario rates."""
+    confidence = evaluation.confidence if evaluation.confidence is not None else 0.95
+    seed_base, seeds = evaluation.seed_base, evaluation.seeds_per_scenario
+    scenarios = evaluation.scenarios or ()
+    lines = [
+        "## Evaluation", "",
+        f"{evaluation.episodes_total} held-out episodes: {len(scenarios)} scenarios x "
+        f"seeds {seed_base}..{(seed_base or 0) + (seeds or 0) - 1}"
+        f" (never used in training). Rates with Wilson {confidence:.0%} intervals.", "",
+        "| policy | collision | success | off-road | failure |", "|---|---|---|---|---|",
+    ]
+    policies = evaluation.policies or {}
+    labels = [evaluation.candidate] + sorted(set(policies) - {evaluation.candidate})
+    for label in labels:
+        o = policies[label].overall
+        lines.append(f"| {label} | {_rate_cell(o.collision)} | {_rate_cell(o.success)} | "
+                     f"{_rate_cell(o.off_road)} | {_rate_cell(o.failure)} |")
+    lines += ["", "### Summary", ""] + [f"- {s}" for s in evaluation.summary or ()]
+    for measure, title in (("collision", "collision rate"), ("success", "success rate")):
+        lines += ["", f"### Per scenario ({title})", "",
+                  "| scenario | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
+        for name in scenarios:
+            cells = [_rate_cell(policies[label].per_scenario[name][measure]) for label in labels]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def _evaluate_chunk(spec: str, episodes: List[Tuple[str, int]], config: Optional[Dict[str, Any]],
@@ -449,7 +438,7 @@ def _duration(seconds: float) -> str:
 def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, int]],
                       configs: Mapping[str, Optional[Dict[str, Any]]], bank_dir: Optional[str] = None,
                       jobs: int = 2, progress: bool = False, log: Optional[Callable[[str], None]] = None,
-                      **section: Any) -> Dict[str, Any]:
+                      **section: Any) -> CardEvaluation:
     """Run every policy of ``specs`` (label -> spec) on the same ``episodes`` and build the
     card's ``evaluation`` section (:func:`evaluation_section`, which takes ``section``: ``candidate``,
     ``confidence``, ``seed_base``, ``seeds``); ``configs`` gives each

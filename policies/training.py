@@ -647,13 +647,13 @@ class HeldOutEvaluationCallback(BaseCallback):
         policy = SB3Policy("training", self.model)
         policy.bind([self._env])
         results = [run_episode(self._env, policy, scenario, seed)[0] for scenario, seed in self.episodes]
-        overall = summarize_results(results)["overall"]
+        overall = summarize_results(results).overall
         for measure in ("collision", "success", "off_road"):
-            self.logger.record(f"eval/{measure}_rate", overall[measure]["rate"])
-        self.logger.record("eval/mean_return", overall["mean_return"])
+            self.logger.record(f"eval/{measure}_rate", overall.measure(measure)["rate"])
+        self.logger.record("eval/mean_return", overall.mean_return)
         self.latest = {"step": int(self.num_timesteps), "episodes": len(results),
-                       **{m: overall[m] for m in ("collision", "success", "off_road", "failure")},
-                       "mean_return": overall["mean_return"]}
+                       **{m: overall.measure(m) for m in ("collision", "success", "off_road", "failure")},
+                       "mean_return": overall.mean_return}
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         with open(self.log_path, "a", encoding="utf-8") as handle:
             handle.write(json.dumps(self.latest, sort_keys=True) + "\n")
@@ -935,16 +935,16 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     model_path = out / "model.zip"
     with atomic_path(model_path, keep_suffix=True) as tmp:
         model.save(tmp)
-    card = _card(config, names, env_config, model, sampler, record)
-    _evaluate_for_card(config, names, card, model_path, log)
-    card_path = write_card(out, _card_record(card))
+    card = _evaluate_for_card(config, names, _card(config, names, env_config, model, sampler, record), env_config,
+                              model_path, log)
+    card_path = write_card(out, card)
     log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
         f"{segment['wall_time_s']:.0f} s)")
     return read_card(card_path)
 
 
 def _card_record(card: Mapping[str, Any]) -> ModelCard:
-    """The record of a card this module built as JSON (values JSON does not know written as text, as the file
+    """The record of a card's fields this module gathered (values JSON does not know written as text, as the file
     has them)."""
     return ModelCard.from_dict(json.loads(json.dumps(dict(card), default=str)))
 
@@ -1009,11 +1009,11 @@ def _restored_sampler(config: TrainConfig, names: Sequence[str],
 
 
 def _card(config: TrainConfig, names: Sequence[str], env_config: Dict[str, Any], model: Any,
-          sampler: ScenarioSampler, record: Mapping[str, Any]) -> Dict[str, Any]:
+          sampler: ScenarioSampler, record: Mapping[str, Any]) -> ModelCard:
     """The trained model's card, without its evaluation."""
     wall = sum(s["wall_time_s"] for s in record["segments"])
     trained = sum(s["end_step"] - s["start_step"] for s in record["segments"])
-    return {
+    return _card_record({
         "name": Path(config.out).name,
         "algorithm": config.algo,
         "policy": config.effective_hyperparameters()["policy"],
@@ -1036,18 +1036,17 @@ def _card(config: TrainConfig, names: Sequence[str], env_config: Dict[str, Any],
             "train_seed_range": [TRAIN_SEED_LOW, TRAIN_SEED_HIGH],
         },
         "versions": _versions(),
-    }
+    })
 
 
-def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: Dict[str, Any], model_path: Path,
-                       log: Callable[[str], None]) -> None:
-    """The card's ``evaluation``: the model and the baselines on held-out seeds (none when ``card_seeds`` is 0);
-    Ctrl-C writes the card without it."""
+def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: ModelCard, env_config: Mapping[str, Any],
+                       model_path: Path, log: Callable[[str], None]) -> ModelCard:
+    """``card`` with its ``evaluation``: the model (in ``env_config``, the card's) and the baselines on held-out seeds
+    (none when ``card_seeds`` is 0); Ctrl-C writes the card without it."""
     card_seeds = config.card_seed_count()
     if card_seeds <= 0:
-        return
+        return card
 
-    env_config = card["env_config"]
     specs = {config.algo: f"{config.algo}:{model_path.resolve()}", **{b: b for b in config.baselines}}
     log(f"model card evaluation: {len(names)} scenarios x {card_seeds} held-out seeds x "
         f"{len(specs)} policies ({', '.join(specs)}) = {len(names) * card_seeds * len(specs)} episodes; "
@@ -1055,17 +1054,17 @@ def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: Dict[str
     baseline_config = {k: v for k, v in env_config.items() if k != "action"}
     configs = {label: (env_config if label == config.algo else baseline_config) for label in specs}
     try:
-        card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, card_seeds), configs,
-                                               bank_dir=config.bank_dir, candidate=config.algo,
-                                               seed_base=EVAL_SEED_BASE, seeds=card_seeds,
-                                               jobs=config.eval_jobs, progress=config.progress_bar, log=log)
+        evaluation = evaluate_for_card(specs, evaluation_episodes(names, card_seeds), configs,
+                                       bank_dir=config.bank_dir, candidate=config.algo, seed_base=EVAL_SEED_BASE,
+                                       seeds=card_seeds, jobs=config.eval_jobs, progress=config.progress_bar, log=log)
     except KeyboardInterrupt:
-        card["evaluation"] = None
-        write_card(Path(config.out), _card_record(card))
+        write_card(Path(config.out), card.replace(evaluation=None,
+                                                  null_fields=(card.null_fields or frozenset()) | {"evaluation"}))
         raise Interrupted(f"stopped during the card's evaluation: {model_path} and "
                           f"{Path(config.out) / 'model_card.json'} are written without it; rerun the same command "
                           "with --resume to evaluate") from None
-    card["evaluation"]["specs"][config.algo] = f"{config.algo}:model.zip (beside this card)"
+    specs_written = {**evaluation.specs, config.algo: f"{config.algo}:model.zip (beside this card)"}
+    return card.replace(evaluation=evaluation.replace(specs=specs_written))
 
 
 # --------------------------------------------------------------------------- fine-tuning

@@ -142,13 +142,13 @@ def test_train_writes_model_card_logs_and_checkpoints_then_resumes(tmp_path, cap
     assert card.training["command"].startswith("dv2s train --algo ppo --steps 256 --envs 2 --seed 1")
     assert card.training["wall_time_s"] > 0 and card.training["steps_per_s"] > 0
     evaluation = card.evaluation
-    assert evaluation["seed_base"] == EVAL_SEED_BASE and evaluation["episodes_total"] == 2
+    assert evaluation.seed_base == EVAL_SEED_BASE and evaluation.episodes_total == 2
     for label in ("ppo", "keep_lane"):
         for measure in ("collision", "success", "off_road"):
-            rate = evaluation["policies"][label]["overall"][measure]
+            rate = evaluation.policies[label].overall.measure(measure)
             assert rate["n"] == 2 and rate["lo"] <= rate["rate"] <= rate["hi"]
-    assert 0 <= evaluation["comparisons"]["keep_lane"]["collision"]["p_two_sided"] <= 1
-    assert evaluation["summary"]
+    assert 0 <= evaluation.comparisons["keep_lane"]["collision"]["p_two_sided"] <= 1
+    assert evaluation.summary and evaluation.specs["ppo"] == "ppo:model.zip (beside this card)"
     lines = [json.loads(line) for line in (out / "evaluations.jsonl").read_text().splitlines()]
     assert lines and lines[0]["step"] >= 128 and lines[0]["episodes"] == 2
 
@@ -388,8 +388,10 @@ def test_card_summary_says_where_the_policy_is_worse():
     candidate = [result(s, seed, s == "a" and seed < 8) for s, seed in episodes]
     baseline = [result(s, seed, False) for s, seed in episodes]
     section = evaluation_section({"ppo": candidate, "rule": baseline}, episodes, candidate="ppo")
-    assert section["policies"]["ppo"]["outcomes"] == {"a": "CCCCCCCC" + "SS", "b": "S" * 10}
-    text = " ".join(section["summary"])
+    assert section.policies["ppo"].outcomes == {"a": "CCCCCCCC" + "SS", "b": "S" * 10}
+    assert section.policies["ppo"].overall.collision["k"] == 8 and section.policies["rule"].overall.errors == 0
+    assert section.scenarios == ("a", "b") and section.to_dict()["seed_base"] is None  # written as null
+    text = " ".join(section.summary)
     assert "On collision rate the ppo does NOT beat (it is significantly worse than) rule" in text
     assert "collides more often than rule on 1 scenario(s): a (8/10 collisions against 0/10)" in text
 

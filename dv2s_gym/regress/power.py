@@ -25,13 +25,14 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, Optional
+from typing import Optional
 
 import numpy as np
 from scipy import stats
 
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT
+from dv2s_gym.regress.records import PowerEstimate, PowerPlan, RunPower, ScenarioPlan
 from dv2s_gym.regress.stats import DEFAULT_CORRELATION
 
 __all__ = ["ASSUMED_BASELINE_RATE", "DEFAULT_MDE", "DEFAULT_POWER", "MAX_PLANNED_EPISODES",
@@ -147,7 +148,7 @@ def _baseline_rate(rates: Optional[Mapping[str, Optional[float]]], name: str) ->
 
 def plan_episodes(scenarios: Sequence[str], *, mde: float = DEFAULT_MDE, power: float = DEFAULT_POWER,
                   alpha: float = 0.05, baseline_rates: Optional[Mapping[str, Optional[float]]] = None,
-                  pooled_weight: float = DEFAULT_POOLED_WEIGHT) -> dict[str, Any]:
+                  pooled_weight: float = DEFAULT_POOLED_WEIGHT) -> PowerPlan:
     """Episodes per scenario so that any one scenario regressing by ``mde`` is FAIL with ``power``.
 
     Args:
@@ -160,8 +161,9 @@ def plan_episodes(scenarios: Sequence[str], *, mde: float = DEFAULT_MDE, power: 
         pooled_weight: the pooled test's share of ``alpha``.
 
     Returns:
-        ``{"episodes", "mde", "power", "level", "per_scenario": {name: {"baseline_rate", "source",
-        "discordance", "episodes"}}, "assumption"}``.
+        The :class:`~dv2s_gym.regress.records.PowerPlan`: ``episodes`` (the most any scenario needs), ``mde``,
+        ``power``, ``level``, ``per_scenario`` (a :class:`~dv2s_gym.regress.records.ScenarioPlan` each) and
+        ``assumption``.
 
     Raises:
         RegressError: (a ValueError) when ``mde`` or ``power`` is out of range, or no run of at most
@@ -173,7 +175,7 @@ def plan_episodes(scenarios: Sequence[str], *, mde: float = DEFAULT_MDE, power: 
     if not 0.0 < float(power) < 1.0:
         raise RegressError(f"--power must be strictly between 0 and 1, e.g. 0.8; not {power}")
     level = scenario_level(alpha, len(scenarios), pooled_weight)
-    per: dict[str, Any] = {}
+    per: dict[str, ScenarioPlan] = {}
     for name in scenarios:
         p0, source = _baseline_rate(baseline_rates, name)
         p0 = min(p0, 1.0 - mde - 1e-4)
@@ -181,13 +183,14 @@ def plan_episodes(scenarios: Sequence[str], *, mde: float = DEFAULT_MDE, power: 
         if n is None:
             raise RegressError(f"no run of up to {MAX_PLANNED_EPISODES} episodes per scenario detects a {100 * mde:g}-point "
                              f"regression in {name} with power {power:g}; give a larger --mde or a lower --power")
-        per[name] = {"baseline_rate": p0, "source": source, "discordance": discordance(p0, mde), "episodes": n}
-    return {"episodes": max(v["episodes"] for v in per.values()), "mde": float(mde), "power": float(power),
-            "level": level, "per_scenario": per, "assumption": _assumption(per)}
+        per[name] = ScenarioPlan(baseline_rate=p0, source=source, discordance=discordance(p0, mde), episodes=n)
+    return PowerPlan(episodes=max(v.episodes for v in per.values()), mde=float(mde), power=float(power), level=level,
+                     per_scenario=per, assumption=_assumption({name: v.source for name, v in per.items()}))
 
 
-def _assumption(per: Mapping[str, Mapping[str, Any]]) -> str:
-    sources = {v["source"] for v in per.values()}
+def _assumption(sources_by_name: Mapping[str, str]) -> str:
+    """The model's assumptions, from each scenario's rate source (``"measured"`` or ``"assumed"``)."""
+    sources = set(sources_by_name.values())
     if sources == {"assumed"}:
         rates = f"an assumed baseline failure rate of {100 * ASSUMED_BASELINE_RATE:g}% in every scenario"
     elif sources == {"measured"}:
@@ -221,19 +224,19 @@ def smallest_detectable(n: int, p0: float, power: float, level: float, step: flo
 
 
 def _power_entry(n: int, p0: float, level: float, margin: float, mde: Optional[float], power: float
-                 ) -> dict[str, Any]:
+                 ) -> PowerEstimate:
     def at(delta: float) -> Optional[float]:
         if delta <= 0 or p0 + delta >= 1.0:
             return None
         return mcnemar_power(n, discordance(p0, delta), delta, level)
 
-    return {"n": int(n), "baseline_rate": p0, "level": level, "at_margin": at(margin),
-            "at_mde": None if mde is None else at(mde), "detectable": smallest_detectable(n, p0, power, level)}
+    return PowerEstimate(n=int(n), baseline_rate=p0, level=level, at_margin=at(margin),
+                         at_mde=None if mde is None else at(mde), detectable=smallest_detectable(n, p0, power, level))
 
 
 def run_power(pairs: Mapping[str, int], baseline_rates: Mapping[str, Optional[float]], *, margin: float,
               alpha: float, mde: Optional[float] = DEFAULT_MDE, power: float = DEFAULT_POWER,
-              pooled_weight: float = DEFAULT_POOLED_WEIGHT) -> dict[str, Any]:
+              pooled_weight: float = DEFAULT_POOLED_WEIGHT) -> RunPower:
     """The power a run had, per scenario and pooled, under the model of the module docstring.
 
     Args:
@@ -246,16 +249,16 @@ def run_power(pairs: Mapping[str, int], baseline_rates: Mapping[str, Optional[fl
         pooled_weight: the pooled test's share of ``alpha``.
 
     Returns:
-        ``{"per_scenario": {name: Power}, "pooled": Power, "power", "mde", "assumption"}`` with
-        ``Power = {"n", "baseline_rate", "level", "at_margin", "at_mde", "detectable"}`` (None where undefined).
+        The :class:`~dv2s_gym.regress.records.RunPower`: a :class:`~dv2s_gym.regress.records.PowerEstimate` per
+        scenario (``per_scenario``) and ``pooled``, the ``power``, the ``mde`` and the ``assumption``.
     """
     names = list(pairs)
     level = scenario_level(alpha, len(names), pooled_weight)
-    per: dict[str, Any] = {}
-    planning: dict[str, Any] = {}
+    per: dict[str, PowerEstimate] = {}
+    planning: dict[str, str] = {}
     for name in names:
         p0, source = _baseline_rate(baseline_rates, name)
-        planning[name] = {"source": source}
+        planning[name] = source
         per[name] = _power_entry(pairs[name], _planning_rate(p0, pairs[name], source), level, margin, mde, power)
     total = sum(int(v) for v in pairs.values())
     known = [(pairs[n], baseline_rates.get(n)) for n in names if baseline_rates.get(n) is not None]
@@ -266,8 +269,7 @@ def run_power(pairs: Mapping[str, int], baseline_rates: Mapping[str, Optional[fl
         pooled_rate, pooled_source = ASSUMED_BASELINE_RATE, "assumed"
     pooled = _power_entry(total, _planning_rate(pooled_rate, total, pooled_source), alpha * pooled_weight, margin,
                           None, power)
-    return {"per_scenario": per, "pooled": pooled, "power": float(power), "mde": mde,
-            "assumption": _assumption(planning)}
+    return RunPower(per_scenario=per, pooled=pooled, power=float(power), mde=mde, assumption=_assumption(planning))
 
 
 def _planning_rate(rate: float, n: int, source: str) -> float:

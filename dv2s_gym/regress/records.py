@@ -11,14 +11,17 @@ renderings, the pytest plugin and the loop's regression step read its parts by a
 - :class:`ScenarioResult`: one scenario's (or all scenarios', ``overall``) :class:`Summary` per policy and their
   :class:`PairedComparison`;
 - :class:`EpisodeError`: an episode that ended in an error (``errors``);
-- :class:`SequentialOutcome`: the sequential test's looks and verdict (``sequential``).
+- :class:`SequentialOutcome`: the sequential test's looks and verdict (``sequential``);
+- :class:`RunPower`: the power the run had (``power``), per scenario and pooled a :class:`PowerEstimate`;
+- :class:`PowerPlan`: the power plan that chose the episodes per scenario (``settings.plan``), per scenario a
+  :class:`ScenarioPlan`.
 
 Each is a :class:`~scenario_bank.records.JsonRecord`: :meth:`from_json` (``from_dict``) reads the JSON object,
 checking the kind of every field it knows (a :class:`~scenario_bank.records.RecordError` names a bad one),
 :meth:`to_json` (``to_dict``) gives back exactly the JSON object: the same keys in the same order, ``null`` where
 the report writes one, unknown keys kept. A record is read by its fields, not by key. The statistics'
-leaves (the ``{"value", "low", "high"}`` intervals, the paired ``table``, ``power`` and ``aggregates``, made by
-:mod:`~dv2s_gym.regress.power` and :mod:`~dv2s_gym.regress.aggregates` with their own documented shapes) stay JSON
+leaves (the ``{"value", "low", "high"}`` intervals, the paired ``table`` and ``aggregates``, made by
+:mod:`~dv2s_gym.regress.stats` and :mod:`~dv2s_gym.regress.aggregates` with their own documented shapes) stay JSON
 objects.
 """
 
@@ -31,7 +34,8 @@ from policies.card_record import ModelCard
 from scenario_bank.records import JsonRecord, RecordError, RegressEpisode
 
 __all__ = ["RegressReport", "BankInfo", "ReportSettings", "PolicyInfo", "PairedEpisode", "Summary",
-           "PairedComparison", "ScenarioResult", "EpisodeError", "SequentialOutcome", "ReportRecord", "as_result"]
+           "PairedComparison", "ScenarioResult", "EpisodeError", "SequentialOutcome", "ReportRecord", "as_result",
+           "PowerEstimate", "RunPower", "ScenarioPlan", "PowerPlan"]
 
 Interval = Mapping[str, Any]
 """``{"value", "low", "high"}`` (a rate adds ``count``, a mean ``n``); values ``None`` without episodes."""
@@ -68,6 +72,100 @@ class BankInfo(ReportRecord):
 
 
 @dataclass(frozen=True, eq=False)
+class ScenarioPlan(ReportRecord):
+    """One scenario of a power plan: the ``baseline_rate`` planned with, its ``source`` (``"measured"`` or
+    ``"assumed"``), the probability of a discordant pair at the planned effect (``discordance``) and the
+    ``episodes`` that reach the planned power."""
+
+    baseline_rate: Optional[float] = None
+    source: Optional[str] = None
+    discordance: Optional[float] = None
+    episodes: Optional[int] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"baseline_rate": "number", "source": "str", "discordance": "number",
+                                        "episodes": "int"}
+    _WHAT: ClassVar[str] = "scenario plan"
+
+
+@dataclass(frozen=True, eq=False)
+class PowerPlan(ReportRecord):
+    """The power plan that sized a run (:func:`~dv2s_gym.regress.power.plan_episodes`): the ``episodes`` per
+    scenario, the ``mde`` and ``power`` planned for, the ``level`` each scenario is tested at, each scenario's
+    :class:`ScenarioPlan` (``per_scenario``) and the model's ``assumption``. A run's report holds it without
+    ``per_scenario`` and with the episodes the plan asked for (``planned``); ``episodes`` is then what the run had,
+    fewer than planned when its baseline report has fewer, which ``note`` says."""
+
+    episodes: Optional[int] = None
+    mde: Optional[float] = None
+    power: Optional[float] = None
+    level: Optional[float] = None
+    per_scenario: Optional[Mapping[str, ScenarioPlan]] = None
+    assumption: Optional[str] = None
+    planned: Optional[int] = None
+    note: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "mde": "number", "power": "number", "level": "number",
+                                        "per_scenario": "object", "assumption": "str", "planned": "int",
+                                        "note": "str"}
+    _ITEMS: ClassVar[Dict[str, type]] = {"per_scenario": ScenarioPlan}
+    _WHAT: ClassVar[str] = "power plan"
+
+
+@dataclass(frozen=True, eq=False)
+class PowerEstimate(ReportRecord):
+    """What ``n`` paired episodes could detect (one scenario, or pooled): the ``baseline_rate`` and test ``level``
+    it was worked out at, the power to FAIL an increase of the margin (``at_margin``) and of the planned effect
+    (``at_mde``), and the smallest increase detected with the planned power (``detectable``); ``None`` where
+    undefined."""
+
+    n: Optional[int] = None
+    baseline_rate: Optional[float] = None
+    level: Optional[float] = None
+    at_margin: Optional[float] = None
+    at_mde: Optional[float] = None
+    detectable: Optional[float] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"n": "int", "baseline_rate": "number", "level": "number",
+                                        "at_margin": "number", "at_mde": "number", "detectable": "number"}
+    _WHAT: ClassVar[str] = "power estimate"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+
+@dataclass(frozen=True, eq=False)
+class RunPower(ReportRecord):
+    """The power a run had (:func:`~dv2s_gym.regress.power.run_power`): a :class:`PowerEstimate` per scenario
+    (``per_scenario``) and ``pooled``, the planned ``power`` and ``mde`` (``None``: not planned for one) and the
+    model's ``assumption``; a report's ``power`` has all but ``mde``."""
+
+    per_scenario: Optional[Mapping[str, PowerEstimate]] = None
+    pooled: Optional[PowerEstimate] = None
+    power: Optional[float] = None
+    mde: Optional[float] = None
+    assumption: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"per_scenario": "object", "pooled": "object", "power": "number",
+                                        "mde": "number", "assumption": "str"}
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("per_scenario", "pooled", "power", "assumption")
+    _NESTED: ClassVar[Dict[str, type]] = {"pooled": PowerEstimate}
+    _ITEMS: ClassVar[Dict[str, type]] = {"per_scenario": PowerEstimate}
+    _WHAT: ClassVar[str] = "run power"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"mde"})
+
+
+
+@dataclass(frozen=True, eq=False)
 class ReportSettings(ReportRecord):
     """The settings a run used: ``episodes`` per scenario from ``seed``, the ``margin`` and ``alpha`` the verdicts
     use, ``sequential`` (with its ``batch``), the ``env_config``, where episodes ran (``backend``, ``workers``,
@@ -86,7 +184,7 @@ class ReportSettings(ReportRecord):
     failure: Optional[Tuple[str, ...]] = None
     stall_seconds: Optional[float] = None
     batch: Optional[int] = None
-    plan: Optional[Mapping[str, Any]] = None
+    plan: Optional[PowerPlan] = None
     mde: Optional[float] = None
     power: Optional[float] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
@@ -97,6 +195,7 @@ class ReportSettings(ReportRecord):
         "env_config": "object", "backend": "str", "workers": "int", "timeout": "number", "failure": "strings",
         "stall_seconds": "number", "batch": "int", "plan": "object", "mde": "number", "power": "number",
     }
+    _NESTED: ClassVar[Dict[str, type]] = {"plan": PowerPlan}
     _LISTS: ClassVar[Tuple[str, ...]] = ("failure",)
     _WHAT: ClassVar[str] = "report settings"
 
@@ -374,7 +473,7 @@ class RegressReport(ReportRecord):
     errors: Optional[Tuple[EpisodeError, ...]] = None
     stopped_early: Optional[bool] = None
     sequential: Optional[SequentialOutcome] = None
-    power: Optional[Mapping[str, Any]] = None
+    power: Optional[RunPower] = None
     aggregates: Optional[Mapping[str, Any]] = None
     error_reason: Optional[str] = None
     hostname: Optional[str] = None
@@ -393,7 +492,7 @@ class RegressReport(ReportRecord):
     }
     _NESTED: ClassVar[Dict[str, type]] = {"bank": BankInfo, "settings": ReportSettings, "candidate": PolicyInfo,
                                           "baseline": PolicyInfo, "overall": ScenarioResult,
-                                          "sequential": SequentialOutcome}
+                                          "sequential": SequentialOutcome, "power": RunPower}
     _ITEMS: ClassVar[Dict[str, type]] = {"episodes": PairedEpisode, "errors": EpisodeError,
                                          "scenarios": ScenarioResult}
     _LISTS: ClassVar[Tuple[str, ...]] = ("regressed", "newly_failing")

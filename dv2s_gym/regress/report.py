@@ -98,8 +98,8 @@ from dv2s_gym.regress.failures import failure_kinds, result_value
 from policies.run_identity import installed_version
 from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, PairedEpisode, PolicyInfo,
-                                      RegressReport, ReportSettings, ScenarioResult, SequentialOutcome, Summary,
-                                      as_result)
+                                      RegressReport, ReportSettings, RunPower, ScenarioResult, SequentialOutcome,
+                                      Summary, as_result)
 from dv2s_gym.regress.store import describe_differences
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
@@ -338,7 +338,7 @@ class _Compared:
     verdict: Optional[str] = None
     regressed: List[str] = dataclasses.field(default_factory=list)
     newly_failing: List[str] = dataclasses.field(default_factory=list)
-    power: Optional[Dict[str, Any]] = None
+    power: Optional[RunPower] = None
     aggregates: Optional[Dict[str, Any]] = None
 
 
@@ -374,7 +374,7 @@ def _compare(episodes: List[PairedEpisode], by_scenario: Dict[str, List[PairedEp
 
 
 def _power(tables: Mapping[str, "stats.PairedTable"], margin: float, alpha: float,
-           settings: ReportSettings) -> Dict[str, Any]:
+           settings: ReportSettings) -> RunPower:
     """The power the run had (:func:`dv2s_gym.regress.power.run_power`), from its baseline's observed failure rates."""
     rates = {name: (table.baseline_rate if table.n else None) for name, table in tables.items()}
     return run_power({name: table.n for name, table in tables.items()}, rates, margin=margin, alpha=alpha,
@@ -533,33 +533,33 @@ def warnings(report: RegressReport) -> List[str]:
 def power_lines(report: RegressReport) -> List[str]:
     """What the run could detect: the power per scenario and pooled at the margin and at the planned effect."""
     power = report.power
-    if not power:
+    if power is None:
         return []
-    per = list((power.get("per_scenario") or {}).values())
-    pooled = power.get("pooled") or {}
+    per = list((power.per_scenario or {}).values())
+    pooled = power.pooled
     margin = 100 * float(report.settings.margin)
-    target = float(power.get("power") or 0.8)
+    target = float(power.power)
 
     def low(key: str) -> Optional[float]:
-        values = [v[key] for v in per if v.get(key) is not None]
+        values = [getattr(v, key) for v in per if getattr(v, key) is not None]
         return min(values) if values else None
 
     def share(value: Optional[float]) -> str:
         return "-" if value is None else f"{value:.2f}"
 
-    detectable = [v["detectable"] for v in per if v.get("detectable") is not None]
+    detectable = [v.detectable for v in per if v.detectable is not None]
     worst = f"+{100 * max(detectable):.1f} pp" if len(detectable) == len(per) and per else "none below 100 pp"
-    mde = power.get("mde")
+    mde = power.mde
     lines = [f"power per scenario (lowest of {len(per)}): {share(low('at_margin'))} at the +{margin:g} pp margin"
              + (f", {share(low('at_mde'))} at +{100 * mde:g} pp" if mde else "")
              + f"; {target:.0%} power at {worst}",
-             f"power pooled ({pooled.get('n', 0)} pairs): {share(pooled.get('at_margin'))} at the +{margin:g} pp margin; "
-             f"{target:.0%} power at " + (f"+{100 * pooled['detectable']:.1f} pp" if pooled.get("detectable") is not None
+             f"power pooled ({pooled.n} pairs): {share(pooled.at_margin)} at the +{margin:g} pp margin; "
+             f"{target:.0%} power at " + (f"+{100 * pooled.detectable:.1f} pp" if pooled.detectable is not None
                                           else "none below 100 pp"),
-             f"power model: {power.get('assumption')}"]
-    note = (report.settings.plan or {}).get("note")
-    if note:
-        lines.append(f"note: {note}")
+             f"power model: {power.assumption}"]
+    plan = report.settings.plan
+    if plan is not None and plan.note:
+        lines.append(f"note: {plan.note}")
     return lines
 
 

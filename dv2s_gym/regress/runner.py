@@ -58,7 +58,7 @@ from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.records import RecordError, RegressEpisode
 from scenario_bank.run_identity import BANK_IDENTITY
-from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, RegressReport, SequentialOutcome
+from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, PowerPlan, RegressReport, SequentialOutcome
 from policies.card_record import ModelCard
 from policies.registry import PolicySpaceError, load_policy
 
@@ -277,7 +277,7 @@ class _Plan:
     names: List[str]
     bank: BankInfo
     episodes: int
-    plan: Optional[Dict[str, Any]]
+    plan: Optional[PowerPlan]
     seeds: List[int]
     batch: int
     candidate_info: PolicyInfo
@@ -343,7 +343,7 @@ def _check_jail(bank_dir: Optional[str], env_config: Mapping[str, Any]) -> None:
 
 
 def _size(settings: RegressSettings, bank_dir: Optional[str], fallback: Optional[Sequence[str]],
-          report: Optional[BaselineReport]) -> Tuple[List[str], int, Optional[Dict[str, Any]]]:
+          report: Optional[BaselineReport]) -> Tuple[List[str], int, Optional[PowerPlan]]:
     """The scenarios, the episodes per scenario and the power plan that chose them (``None`` when given)."""
     names = _select(list(settings.scenarios) if settings.scenarios is not None else None, bank_dir, fallback)
     if settings.episodes is not None and (settings.mde is not None or settings.power is not None):
@@ -506,7 +506,7 @@ def _run_sequential(plan: _Plan, settings: RegressSettings, runner: Any, episode
 
 def _planned_episodes(names: Sequence[str], baseline_report: Optional[Union[str, os.PathLike]], role: str,
                       seed: int, mde: Optional[float], power: Optional[float], alpha: float
-                      ) -> Tuple[int, Dict[str, Any]]:
+                      ) -> Tuple[int, PowerPlan]:
     """Episodes per scenario from the power plan; with a baseline report, its failure rates and at most its episodes."""
     rates: Dict[str, Optional[float]] = {}
     available = None
@@ -524,14 +524,13 @@ def _planned_episodes(names: Sequence[str], baseline_report: Optional[Union[str,
                                         baseline_rates=rates)
     except ValueError as error:
         raise RegressError(str(error)) from None
-    episodes = plan["episodes"]
-    plan = {key: value for key, value in plan.items() if key != "per_scenario"}
-    plan["planned"] = episodes
-    if available is not None and available < episodes:
-        episodes = max(1, available)
-        plan["note"] = (f"the baseline report has {available} episode(s) per scenario from seed {seed}, fewer than "
-                        f"the {plan['planned']} planned: the run has less power than planned (see its power)")
-    plan["episodes"] = episodes
+    planned = plan.episodes
+    note = None
+    if available is not None and available < planned:
+        note = (f"the baseline report has {available} episode(s) per scenario from seed {seed}, fewer than "
+                f"the {planned} planned: the run has less power than planned (see its power)")
+    episodes = planned if note is None else max(1, available)
+    plan = dataclasses.replace(plan, episodes=episodes, per_scenario=None, planned=planned, note=note)
     return episodes, plan
 
 
