@@ -21,7 +21,7 @@ from policies.training import EVAL_SEED_BASE, TRAIN_SEED_LOW
 from scenario_bank.bank import Bank
 
 CARD = read_card(SHIPPED_CHECKPOINT)
-EVALUATION = CARD.evaluation
+EVALUATION = CARD.evaluation.to_dict()
 CANDIDATE = EVALUATION["candidate"]
 
 
