@@ -50,3 +50,22 @@ def test_a_tag_selection_resumes_over_the_scenarios_it_chose_though_the_bank_gre
     with pytest.raises(RunIdentityError, match=r"scenarios: the run has 1, asked adds \['urban_lead_vehicle_stopped'\]"):
         mine("rule", settings.replace(budget=3, scenarios=("tag:lead_vehicle_stopped", "urban_lead_vehicle_stopped")),
              out=tmp_path / "run", progress=False, reports=False)
+
+
+@pytest.mark.slow
+def test_a_resume_over_a_scenario_the_bank_no_longer_holds_says_so(tmp_path):
+    """The recorded scenarios come from the run, not the command line: the refusal names the run and the bank."""
+    import shutil
+
+    from dv2s_gym.mining.errors import MiningError
+    from scenario_bank.bank import BANK_DIR
+
+    bank = tmp_path / "bank"
+    for name in ("highway_lead_vehicle_stopped", "urban_lead_vehicle_stopped"):
+        shutil.copytree(BANK_DIR / name, bank / name)
+    settings = MineSettings(budget=1, scenarios=("tag:lead_vehicle_stopped",), bank_dir=str(bank), convert=False)
+    mine("rule", settings, out=tmp_path / "run", progress=False, reports=False)
+    shutil.rmtree(bank / "urban_lead_vehicle_stopped")
+    with pytest.raises(MiningError, match=r"holds a mining run over 'urban_lead_vehicle_stopped', which the bank at "
+                                          r".* no longer holds; restore it"):
+        mine("rule", settings.replace(budget=2, scenarios=None), out=tmp_path / "run", progress=False, reports=False)

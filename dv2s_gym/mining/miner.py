@@ -650,6 +650,8 @@ def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[R
     saved = _read_settings(out)
     batch = settings.batch or (saved.batch if saved else DEFAULT_BATCH)  # never the workers: the seed decides the run
     settings = settings.replace(batch=int(batch))
+    if saved is not None and saved.scenarios:
+        _check_still_in_bank(out, saved.scenarios, settings.bank_dir)
     if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
         before_space = _recorded(policy, settings, saved.scenarios, {})
         _check_resume(saved.values, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
@@ -678,6 +680,17 @@ def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[R
     atomic_write_json(out / SETTINGS_FILE, recorded)
     return _Mining(out=out, policy=policy, settings=settings.replace(scenarios=tuple(space.scenarios)),
                    schedule=schedule, space=space)
+
+
+def _check_still_in_bank(out: Path, names: Sequence[str], bank_dir: Optional[str]) -> None:
+    """Refuse to resume the run in ``out`` over its recorded scenarios ``names`` when the bank no longer holds one
+    (the names come from the run, not from the command line: no did-you-mean)."""
+    bank = Bank(bank_dir)
+    gone = [name for name in names if name not in bank.names() and name not in bank.problems]
+    if gone:
+        shown = ", ".join(repr(name) for name in gone[:3]) + (f" and {len(gone) - 3} more" if len(gone) > 3 else "")
+        raise MiningError(f"{out} holds a mining run over {shown}, which the bank at {bank.root} no longer holds; "
+                          "restore it (dv2s bank add or import), or start a new --out folder")
 
 
 def _run_episodes(mining: _Mining, done: Dict[int, EpisodeRecord], workers: WorkerSettings, n_workers: int,
