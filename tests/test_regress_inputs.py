@@ -59,7 +59,7 @@ def test_a_factory_spec_is_called_and_a_module_in_the_current_folder_is_found(tm
     assert my_policies_here.CALLS == [{}]  # the factory was called, without options
     with pytest.raises(ValueError, match="cannot build"):
         load_policy("my_policies_here:make?broken=true")
-    with pytest.raises(PolicyError, match="returned a int, not a Policy"):
+    with pytest.raises(PolicyError, match="returned an int, not a Policy"):
         (tmp_path / "other_policies_here.py").write_text("def make():\n    return 3\n")
         load_policy("other_policies_here:make")
     # the workers find the module in this folder too
