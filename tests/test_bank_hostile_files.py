@@ -226,9 +226,12 @@ def test_hostile_folder_through_the_cli(name, world, tmp_path):
 @pytest.mark.slow
 def test_names_given_on_the_command_line_are_validated(world):
     bank_dir, _, _ = world
-    for command in (["show", "../outside"], ["validate", "/etc"], ["rm", "../x"], ["export", "a.tar.gz", "--name", "a/b"]):
+    for command, said in ((["show", "../outside"], "`dv2s bank show` takes the name of a scenario in the bank"),
+                          (["validate", "/etc"], "invalid scenario name"),
+                          (["rm", "../x"], "`dv2s bank rm` takes the name of a scenario in the bank"),
+                          (["export", "a.tar.gz", "--name", "a/b"], "invalid scenario name")):
         code, _, err = cli("bank", "--bank", bank_dir, *command)
-        assert code == 2 and "invalid scenario name" in one_error_line(err), (command, err)
+        assert code == 2 and said in one_error_line(err), (command, err)
     assert Bank(bank_dir).names() == [GOOD]
 
 
