@@ -18,8 +18,8 @@ too), :class:`~dv2s_gym.mining.tasks.MineTask` per episode (its JSON object only
 :class:`~dv2s_gym.mining.settings.RunOrigin`; ``settings.json`` is written from them and read back only to check a
 resumed run's identity.
 
-A typed record is no mapping (:func:`test_a_typed_record_is_no_mapping`): it is read by its fields, and its JSON object
-is its ``to_dict``.
+The product reads a typed record by its fields; its JSON object is its ``to_dict``
+(:func:`test_a_record_says_whether_it_holds_anything_and_round_trips`).
 """
 
 from __future__ import annotations
