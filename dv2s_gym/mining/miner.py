@@ -686,7 +686,8 @@ def _check_still_in_bank(out: Path, names: Sequence[str], bank_dir: Optional[str
     """Refuse to resume the run in ``out`` over its recorded scenarios ``names`` when the bank no longer holds one
     (the names come from the run, not from the command line: no did-you-mean)."""
     bank = Bank(bank_dir)
-    gone = [name for name in names if name not in bank.names() and name not in bank.problems]
+    held = set(bank.names()) | set(bank.problems)
+    gone = [name for name in names if name not in held]
     if gone:
         shown = ", ".join(repr(name) for name in gone[:3]) + (f" and {len(gone) - 3} more" if len(gone) > 3 else "")
         raise MiningError(f"{out} holds a mining run over {shown}, which the bank at {bank.root} no longer holds; "
