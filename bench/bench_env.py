@@ -157,7 +157,7 @@ def where_time_goes(env, steps: int) -> list:
         ("Scenic state read-back", cum("scenic_highway/simulator.py", "updateObjects")),
         ("highway-env physics (road.step)", cum("envs/hw_road.py", "step")),
         ("  of which collision tests", cum("envs/hw_road.py", "_collide")),
-        ("lane look-ups", cum("envs/road_network.py", "get_closest_lane_index")),
+        ("lane look-ups", cum("envs/road_network/lanes.py", "get_closest_lane_index")),
         ("observation", cum("envs/observations.py", "observe")),
         ("time-to-collision", cum("envs/safety_metrics.py", "time_to_collision")),
         ("trace record (actor states)", cum("envs/dv2s_env.py", "_record_state")),

@@ -304,7 +304,7 @@ def test_closest_lane_index_matches_highway_env(converted: ConvertedNetwork):
 
 def test_closest_lane_bounds_same_in_python_and_numpy(converted: ConvertedNetwork, monkeypatch):
     """Small networks bound lanes in plain Python, large ones with NumPy: the same bounds and lane."""
-    import envs.road_network as road_network
+    import envs.road_network.lanes as lanes_module
 
     hw = converted.hw_network
     lanes = hw.lanes_list()
@@ -316,9 +316,9 @@ def test_closest_lane_bounds_same_in_python_and_numpy(converted: ConvertedNetwor
         points.append((pos, rng.uniform(-math.pi, math.pi)))
     hw.get_closest_lane_index(points[0][0])  # builds the index
     index = hw._closest_index
-    monkeypatch.setattr(road_network, "_SMALL_NETWORK", 10**6)
+    monkeypatch.setattr(lanes_module, "_SMALL_NETWORK", 10**6)
     python = [(index.lower_bounds(*pos), hw.get_closest_lane_index(pos, h)) for pos, h in points]
-    monkeypatch.setattr(road_network, "_SMALL_NETWORK", -1)
+    monkeypatch.setattr(lanes_module, "_SMALL_NETWORK", -1)
     numpy = [(index.lower_bounds(*pos), hw.get_closest_lane_index(pos, h)) for pos, h in points]
     for (b_py, lane_py), (b_np, lane_np) in zip(python, numpy):
         assert lane_py == lane_np
