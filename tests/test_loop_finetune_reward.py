@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 import policies.training as training
+import policies.training.scenario_envs as scenario_envs
 from cli_helpers import one_line_error, run
 from scenario_bank.records import HeldOutEpisode
 from scenario_bank.run_identity import RunIdentityError
@@ -47,14 +48,14 @@ def test_reward_overrides_change_only_the_named_terms():
 @pytest.mark.slow
 def test_fine_tune_trains_with_the_overridden_reward_and_records_it(tmp_path, monkeypatch):
     seen = []
-    build = training._build_train_env
+    build = scenario_envs._build_train_env
 
     def recording_build(*args, **kwargs):
         env = build(*args, **kwargs)
         seen.append(dict(env.unwrapped.config["reward_weights"]))
         return env
 
-    monkeypatch.setattr(training, "_build_train_env", recording_build)
+    monkeypatch.setattr(scenario_envs, "_build_train_env", recording_build)
     path = fine_tune("dv2s-ppo", bank_dir=None, out=tmp_path / "ft", steps=10, weights={SOURCES[0]: 1.0}, n_envs=1,
                      vec_env="dummy", progress_bar=False, reward_weights={"standing": -1.0}, log=lambda _: None)
     assert seen and all(w["standing"] == -1.0 for w in seen)  # the env the policy trained in

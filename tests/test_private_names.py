@@ -356,7 +356,7 @@ LIBRARY_PRIVATE_NAMES: Dict[str, Tuple[Tuple[str, ...], str]] = {
     "_replayOut": (("envs.scenic_highway.simulator",), "Scenic's record of a simulation for replay"),
     "_isRunning": (("envs.scenic_highway.simulator",), "Scenic's flag of a simulation still running"),
     "_stop": (("envs.scenic_highway.simulator",), "Scenic's end of a simulation"),
-    "_setup_lr_schedule": (("policies.training",),
+    "_setup_lr_schedule": (("policies.training.fine_tuning",),
                            "Stable-Baselines3's rebuild of a model's learning-rate schedule after its rate is set"),
 }
 """Private names of the standard library or a third-party library a project module uses as an attribute:

@@ -34,10 +34,10 @@ def test_each_run_kind_names_its_record_in_the_table():
     from dv2s_gym.loop.run import STATE_SCHEMA
     from dv2s_gym.mining.miner import SETTINGS_FILE, SETTINGS_SCHEMA
     from dv2s_gym.regress import store
-    from policies import training
+    from policies.training import run_record
 
     assert RUN_KINDS[SETTINGS_SCHEMA][0] == SETTINGS_FILE and RUN_KINDS[STATE_SCHEMA][0] == "loop.json"
-    assert RUN_KINDS[store._RUN_SCHEMA][0] == store.RUN_FILE and RUN_KINDS[training._RUN_SCHEMA][0] == "run.json"
+    assert RUN_KINDS[store._RUN_SCHEMA][0] == store.RUN_FILE and RUN_KINDS[run_record._RUN_SCHEMA][0] == "run.json"
 
 
 @pytest.mark.parametrize("held, command", [

@@ -383,7 +383,7 @@ NAMED_NOT_LOADED: Dict[Tuple[str, str], str] = {
     ("policies.run_identity", "scenario_bank"): "the project's packages whose files are not a policy's helpers "
                                                 "(paths)",
     ("policies.run_identity", "dv2s_gym"): "the project's packages whose files are not a policy's helpers (paths)",
-    ("policies.training", "envs"): "the name of the --envs option in a check of the settings",
+    ("policies.training.config", "envs"): "the name of the --envs option in a check of the settings",
 }
 """``(module, project module)`` -> why a string in the module naming that project module does not load it (a
 name in a list of packages, a folder in a path, an option's name)."""
