@@ -107,7 +107,7 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
     assert few.to_dict()["relative_drop"] is None and few.to_dict()["mcnemar_p"] is None and few.to_dict()["after"]["k"] == 8
     three = heldout_comparison(held(start), held(tuned), None, min_episodes=20, families={**two, "s2": "fam_z"}, min_families=3)
     assert "underpowered" not in three.to_dict() and three.to_dict()["heldout_families"] == 3 and three.to_dict()["mcnemar_p"] < 0.01
-    from dv2s_gym.loop.report import _heldout_lines, _round_row
+    from dv2s_gym.loop.report_text import _heldout_lines, _round_row
 
     assert "40 pairs from 2 families (4 scenarios)" in _heldout_lines(few)[1]
     assert _round_row(RoundRecord.from_dict({"round": 1, "steps": {"after": few}}))["drop"] == \
@@ -119,7 +119,7 @@ def test_the_heldout_report_names_entries_the_starting_policy_mostly_passes():
     """A kept failure is exact at its own seed only: held out at other seeds, the start may pass most of it, and
     the report says so beside the table instead of leaving the reader to count."""
     from dv2s_gym.loop.run import heldout_comparison
-    from dv2s_gym.loop.report import _heldout_lines
+    from dv2s_gym.loop.report_text import _heldout_lines
 
     def records(failed_by_scenario):
         return [{"scenario": name, "seed": seed, "failed": seed < failed, "error": None}
@@ -135,7 +135,7 @@ def test_the_heldout_report_names_entries_the_starting_policy_mostly_passes():
 
 def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_of_a_family_are_not_independent():
     from dv2s_gym.loop.run import heldout_comparison
-    from dv2s_gym.loop.report import _heldout_lines
+    from dv2s_gym.loop.report_text import _heldout_lines
 
     families, start, tuned = {}, [], []
 
@@ -1245,7 +1245,7 @@ def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_
     record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
                                                             "regress": {"verdict": "PASS", "reason": "r"}}}
     assert judge_round(record).verdict == "NOT ACCEPTED"
-    from dv2s_gym.loop.report import _heldout_lines
+    from dv2s_gym.loop.report_text import _heldout_lines
 
     assert "from 2 families (3 scenarios, 1 more with no tested pair)" in "\n".join(_heldout_lines(summary))
     # with every family tested the same round is judged, and the sentence gives the pairs beside p

@@ -358,7 +358,7 @@ def test_a_fine_tuned_policy_that_fails_on_the_untouched_set_is_not_accepted():
 
 def test_an_untouched_set_the_start_failed_entirely_is_called_vacuous_in_the_verdict_and_the_report():
     from dv2s_gym.loop.record import UntouchedComparison
-    from dv2s_gym.loop.report import _untouched_lines
+    from dv2s_gym.loop.report_text import _untouched_lines
 
     def policies(start_failed: int) -> dict:
         rate = {"value": start_failed / 6, "low": 0.0, "high": 1.0}

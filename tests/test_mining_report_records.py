@@ -69,7 +69,7 @@ def test_a_merged_clusters_clip_is_captioned_as_its_own_script_in_the_mining_rep
 
 def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
     from dv2s_gym.loop.errored import errored_episodes, merged_messages, messages_text
-    from dv2s_gym.loop.report import _errored_lines
+    from dv2s_gym.loop.report_text import _errored_lines
     from dv2s_gym.workers.tasks import gave_up_result
 
     hung = ["the worker hung (no result after 60 s)"] * 2
@@ -112,7 +112,8 @@ def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(t
 
 def test_the_loop_html_shows_a_kind_with_its_seed_mark_escaped():
     from dv2s_gym.loop.errored import errored_episodes
-    from dv2s_gym.loop.report import _errored_lines, _markdown_to_html
+    from dv2s_gym.loop.html import _markdown_to_html
+    from dv2s_gym.loop.report_text import _errored_lines
     from dv2s_gym.workers.tasks import gave_up_result
 
     found = errored_episodes([gave_up_result({"scenario": "s", "seed": seed, "role": "eval", "policy": "p"},
@@ -158,7 +159,7 @@ def test_every_kept_entry_of_the_loop_report_shows_its_clip_or_why_it_has_none(t
 
 
 def test_the_loop_report_lists_an_exact_replays_parameters_left_at_the_parents_distribution(tmp_path):
-    from dv2s_gym.loop.report import _mining_lines
+    from dv2s_gym.loop.report_text import _mining_lines
     from dv2s_gym.loop.replays import replay_entries
 
     why = "its distribution Normal(0, 1) is not read as an interval or a set of numbers, so it keeps the parent's"

@@ -40,7 +40,7 @@ DV2S_GYM = ROOT / "dv2s_gym"
 
 TYPED_MODULES = ("mining.behaviour", "mining.cluster", "mining.family", "mining.sampling.rate", "mining.report",
                  "mining.report_record", "mining.html", "mining.conversion.record", "mining.miner", "loop.split",
-                 "loop.run", "loop.record", "loop.report", "loop.verdict")
+                 "loop.run", "loop.record", "loop.report", "loop.report_text", "loop.html", "loop.verdict")
 """The modules of the miner and the loop (under ``dv2s_gym``) whose functions pass typed records."""
 
 JSON_BOUNDARIES: Dict[str, str] = {
@@ -53,8 +53,9 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "loop.verdict.recommendation": "takes the body of report.json (and returns its typed Recommendation)",
     "loop.report.final_vs_start": "takes the body of report.json (and returns its typed FinalVsStart)",
     "loop.report.with_cross_round_checks": "takes and returns the body of report.json",
-    "loop.report.render_markdown": "renders the body of report.json",
-    "loop.report.render_html": "renders the body of report.json",
+    "loop.report_text.report_rounds": "reads the rounds of the body of report.json as records",
+    "loop.report_text.render_markdown": "renders the body of report.json",
+    "loop.html.render_html": "renders the body of report.json",
     "loop.report.round_clips": "takes the body of report.json",
     "loop.report.write_loop_reports": "writes the body of report.json and its renderings",
 }

@@ -38,6 +38,9 @@ SHARED_PRIVATE_NAMES: Dict[Tuple[str, str], str] = {
         "the bird's-eye analyzer is one algorithm split into files by stage (frames, detection, tracking, road, "
         "events, language, analyze); its underscore helpers are shared by those files only, and the package's "
         "interface is analyze's public functions",
+    ("dv2s_gym.loop.html", "dv2s_gym.loop.report_text"):
+        "the loop report in two renderings split into files by rendering: the page shows the rows, the settings "
+        "sentences and the recommendation the Markdown form builds, through its underscore helpers",
 }
 """``(importing module, imported module)`` -> why the first may use the second's private names; a name ending in a
 dot stands for every module of that package."""

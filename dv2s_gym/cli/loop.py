@@ -186,7 +186,7 @@ def _default(key: str, text: str) -> str:
 
 def summary_lines(report: "LoopReport") -> List[str]:
     """The terminal's summary of a finished loop: one line per round, the verdict, where the reports are."""
-    from dv2s_gym.loop.report import round_summary
+    from dv2s_gym.loop.report_text import round_summary
 
     lines = [round_summary(record) for record in report.rounds]
     verdict = report.recommendation
