@@ -478,13 +478,13 @@ def test_each_failed_check_of_the_judge_is_its_own_reason():
     interaction = {"kind": "car", "manoeuvres": ["brake", "stop"], "failure_type": "stall"}
     out = {"reproduction": {"k": 10, "reproduced": 2, "rate": 0.2, "interaction_shown": 1},
            "avoidability": {"reference": "rule", "k": 10, "failed": 6, "avoided_rate": 0.4}}
-    reasons = [str(r) for r in judge_conversion(out, interaction, {"type": "stall"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion(out, interaction, Failure("stall"), 0.3)]
     assert [r.split(":")[0] for r in reasons] == ["interaction", "reproduction", "avoidability"]
     assert "car (brake, stop) in 1 of 10" in reasons[0] and "stall failure with a car in 2 of 10" in reasons[1]
     assert "rule failed in 6 of 10" in reasons[2]
     passing = {"reproduction": {"k": 10, "reproduced": 3, "rate": 0.3, "interaction_shown": 3},
                "avoidability": {"reference": "rule", "k": 10, "failed": 4, "avoided_rate": 0.6}}
-    assert judge_conversion(passing, interaction, {"type": "stall"}, 0.3) == []
+    assert judge_conversion(passing, interaction, Failure("stall"), 0.3) == []
     # the reference avoiding it in half of the episodes is not "most"
     half = {**passing, "avoidability": {"reference": "rule", "k": 10, "failed": 5, "avoided_rate": 0.5}}
     assert [str(r).split(":")[0] for r in judge_conversion(half, interaction, {"type": "stall"}, 0.3)] == ["avoidability"]
