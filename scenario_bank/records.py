@@ -525,8 +525,8 @@ class Failure(JsonRecord):
     other actor it was ``with_`` (JSON ``with``) and that actor's kind (``with_kind``), how a collision happened
     (``collision_type``), the smallest time to collision (``min_ttc``) and the ego's ``speed`` [m/s] at the failure.
     :attr:`kind` is ``type`` refined by the collision type. A failure's JSON object holds ``kind`` too: the one read
-    is the failure's kind and is written back as it was (``recorded_kind``); a new failure writes its own. Other keys (a plug-in's) are kept
-    in ``extra``.
+    is the failure's kind and is written back as it was (``recorded_kind``); a new failure writes its own. Other
+    keys (a plug-in's) are kept in ``extra``.
 
     ``null_fields``: the fields written as ``null`` when ``None``; by default every one, as the monitors write a
     failure.

@@ -445,8 +445,8 @@ def _failure_rows(failures: Sequence[FailureEntry], limit: int = 200) -> str:
     for f in failures[:limit]:
         reference = f.reference or {}
         ref_failure = Failure.of(reference.get("failure")) if isinstance(reference, Mapping) else None
-        ref_text = (f"{reference.get('policy', '?')}: " + (ref_failure.type if ref_failure is not None else "no failure")
-                    if reference else "–")
+        ref_text = (f"{reference.get('policy', '?')}: "
+                    + (ref_failure.type if ref_failure is not None else "no failure") if reference else "–")
         rows.append([(escape(f.index), True), (_breakable(f.scenario), False),
                      (escape(f.seed), True), (escape(f.type), False), (escape(ref_text), False),
                      (f"<code>{_breakable(f.cluster)}</code>", False), (_breakable(f.trace or "–"), False)])
