@@ -79,7 +79,7 @@ def main(argv=None) -> int:
     for record in chosen:
         start = time.perf_counter()
         out = convert_failure(record, work / "run", ConversionSettings(policy=args.policy, k=args.k), bank=work / "bank",
-                              cluster=f"{record.scenario}/{record.failure['type']}/bench")
+                              cluster=f"{record.scenario}/{record.failure.type}/bench")
         wall = time.perf_counter() - start
         baseline = None
         if not args.no_baseline and out.video:
@@ -91,7 +91,7 @@ def main(argv=None) -> int:
             finally:
                 del os.environ["DV2S_SANDBOX_CACHE"]
         rate = (out.reproduction or {}).get("rate")
-        rows.append({"scenario": record.scenario, "failure": record.failure.get("kind"), "status": str(out.status),
+        rows.append({"scenario": record.scenario, "failure": record.failure.kind, "status": str(out.status),
                      "stage": out.stage, "reason": out.reason, "rate": rate, "e2e_sc": out.e2e_sc,
                      "seconds": wall, "timings": out.timings, "baseline_seconds": baseline})
         print(f"  {record.scenario:<38} {str(out.status):<8} {wall:6.2f} s  rate {rate if rate is None else f'{rate:.1f}'}"

@@ -6,11 +6,14 @@ Five records stand for the JSON objects the subsystems hand each other and write
   seed, generator; for a mined entry also the failure, cluster, reproduction rate, E2E-SC and replay parameters).
 - :class:`Sidecar`: a bank entry's ``meta.json`` (description, elements, story, tags, map, provenance, hash).
 - :class:`EpisodeRecord`: one episode of a failure-mining run, a line of its ``episodes.jsonl`` (the scene, the
-  policy's result and failure, the reference driver's outcome, the sampler's point).
+  policy's result and failure, the reference driver's outcome, the sampler's point). Its ``failure`` is a
+  :class:`Failure` (what the failure monitors found) and its ``behaviour`` a :class:`Behaviour` (who else was involved
+  and what each side was doing).
 - :class:`RegressEpisode`: one policy's episode of a regression run, a line of its ``results.jsonl`` and a result
   in its report (the episode's outcome measures, the failure kinds it counts, its trace, or the error it ended in).
 - :class:`HeldOutEpisode`: one episode of a loop's held-out evaluation, a line of a round's ``heldout.jsonl`` (the
-  role and policy, the scene, whether the policy failed and how, its result, or the error it ended in).
+  role and policy, the scene, whether the policy failed and how (a :class:`Failure`), its result, or the error it
+  ended in).
 
 Each is a frozen dataclass (a :class:`JsonRecord`) with :meth:`from_dict` (checks every field it knows; a
 :class:`RecordError` names the bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the
@@ -38,7 +41,8 @@ from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_r
 from scenario_bank.story import StoryError, normalize_story
 
 __all__ = ["RecordError", "JsonRecord", "recorded", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode",
-           "HeldOutEpisode", "SOURCE_KINDS", "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES",
+           "HeldOutEpisode", "Failure", "Behaviour", "UNKNOWN_PART", "BEHAVIOUR_PARTS", "SOURCE_KINDS",
+           "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES",
            "SIDECAR_VERSION", "SCRIPT", "SIDECAR", "CONTROL_FIX", "control_character_field", "is_entry_file"]
 
 SCRIPT = "scenario.scenic"
@@ -498,6 +502,125 @@ class Sidecar(JsonRecord):
         return self.source if self.source is not None else Provenance(null_fields=frozenset())
 
 
+def _read_nested(record: JsonRecord) -> None:
+    """Read the nested records of ``record`` given as JSON objects (code that builds a record from the files' dict
+    form) into their records, checked as :meth:`JsonRecord.from_dict` checks them."""
+    for key, nested in record._NESTED.items():
+        attribute = record._ATTRIBUTES.get(key, key)
+        value = getattr(record, attribute)
+        if value is not None and not isinstance(value, nested):
+            object.__setattr__(record, attribute, record._nested(key, value))
+
+
+UNKNOWN_PART = "unknown"
+"""What a :class:`Behaviour` says of a part its record or trace cannot tell."""
+BEHAVIOUR_PARTS = ("actor", "actor_manoeuvre", "ego_manoeuvre")
+"""The parts of a :class:`Behaviour`, in the order its JSON object holds them."""
+
+
+@dataclass(frozen=True, eq=False)
+class Failure(JsonRecord):
+    """One failure of an episode, as the failure monitors (:mod:`dv2s_gym.mining.monitors`) find it and episode
+    records hold it: its ``type`` (a row of :mod:`scenario_bank.failure_types`), ``time`` [s] and ``step``; the
+    other actor it was ``with_`` (JSON ``with``) and that actor's kind (``with_kind``), how a collision happened
+    (``collision_type``), the smallest time to collision (``min_ttc``) and the ego's ``speed`` [m/s] at the failure.
+    :attr:`kind` is ``type`` refined by the collision type. A failure's JSON object holds ``kind`` too: the one read
+    is the failure's kind and is written back as it was (``recorded_kind``); a new failure writes its own. Other
+    keys (a plug-in's) are kept in ``extra``.
+
+    ``null_fields``: the fields written as ``null`` when ``None``; by default every one, as the monitors write a
+    failure.
+    """
+
+    type: str
+    time: Optional[float] = None
+    step: Optional[int] = None
+    with_: Optional[str] = None
+    with_kind: Optional[str] = None
+    collision_type: Optional[str] = None
+    min_ttc: Optional[float] = None
+    speed: Optional[float] = None
+    recorded_kind: Optional[str] = None
+    """The ``kind`` the failure's JSON object holds (a new failure's own :attr:`kind`; ``None``: it holds none)."""
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "type": "str", "time": "number", "step": "int", "with_kind": "str", "collision_type": "str",
+        "min_ttc": "number", "speed": "number", "with": "str", "kind": "str",
+    }
+    _ATTRIBUTES: ClassVar[Dict[str, str]] = {"with": "with_", "kind": "recorded_kind"}
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("type",)
+    _WHAT: ClassVar[str] = "failure"
+
+    def __post_init__(self) -> None:
+        if self.null_fields is None and self.recorded_kind is None:  # a new failure, not one read from JSON
+            object.__setattr__(self, "recorded_kind", self.kind)
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+    @property
+    def kind(self) -> str:
+        """``type`` refined by the collision type (``"collision:rear_end"``): the failure class a reproduction must
+        show; the one the JSON object holds when it holds one."""
+        return self.recorded_kind or (f"{self.type}:{self.collision_type}" if self.collision_type else self.type)
+
+    @classmethod
+    def of(cls, value: Union["Failure", Mapping[str, Any], None]) -> Optional["Failure"]:
+        """The failure ``value`` holds (a failure, its JSON object as a file holds it, or ``None``); ``None`` when it
+        holds none (``None`` or an empty object)."""
+        return cls.from_dict(value) if value else None
+
+    def completed_by(self, other: "Failure") -> "Failure":
+        """This failure with each field it leaves out (``None``) taken from ``other``, the same failure found again
+        (its episode re-run): a failure record written by hand may hold only its type. The JSON object written
+        holds the fields either one's does."""
+        changes = {item.name: getattr(other, item.name) for item in dataclasses.fields(self)
+                   if item.name not in ("extra", "null_fields") and getattr(self, item.name) is None}
+        mine, theirs = (record.default_null_fields() if record.null_fields is None else record.null_fields
+                        for record in (self, other))
+        nulls = None if self.null_fields is None and other.null_fields is None else mine | theirs
+        return self.replace(**changes, extra={**other.extra, **self.extra}, null_fields=nulls)
+
+    def to_json(self) -> Dict[str, Any]:
+        """The failure's JSON object (:meth:`to_dict`): ``with_`` is stored as ``with``, with the ``kind``."""
+        return self.to_dict()
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> "Failure":
+        """The failure of its JSON object (:meth:`from_dict`)."""
+        return cls.from_dict(data)
+
+
+@dataclass(frozen=True, eq=False)
+class Behaviour(JsonRecord):
+    """What happened in a failure (:mod:`dv2s_gym.mining.behaviour`): the kind of the other ``actor`` involved
+    (``"car"``, ``"truck"``, ``"pedestrian"``, ...; ``"none"`` without one), what it was doing
+    (``actor_manoeuvre``) and what the ego was doing (``ego_manoeuvre``); ``"unknown"`` where the trace cannot tell
+    it. A behaviour read from a JSON object holds its parts as the object does (``None`` for one it leaves out or
+    holds as ``null``, and writes them back so); :meth:`complete` reads such a part as ``"unknown"``. Other keys are
+    kept in ``extra``.
+
+    ``null_fields``: the parts written as ``null`` when ``None``; by default none.
+    """
+
+    actor: Optional[str] = None
+    actor_manoeuvre: Optional[str] = None
+    ego_manoeuvre: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"actor": "str", "actor_manoeuvre": "str", "ego_manoeuvre": "str"}
+    _WHAT: ClassVar[str] = "behaviour"
+
+    def complete(self) -> "Behaviour":
+        """This behaviour with ``"unknown"`` for each part it does not tell (``None`` or empty), as the reports
+        and the clusters read it."""
+        parts = {key: getattr(self, key) or UNKNOWN_PART for key in BEHAVIOUR_PARTS}
+        return self if all(getattr(self, key) for key in BEHAVIOUR_PARTS) else Behaviour(**parts)
+
+
 @dataclass(frozen=True, eq=False)
 class EpisodeRecord(JsonRecord):
     """One episode of a failure-mining run: a line of the run's ``episodes.jsonl``.
@@ -522,14 +645,14 @@ class EpisodeRecord(JsonRecord):
     policy: Optional[str] = None
     params: Optional[Mapping[str, Any]] = None
     result: Optional[Mapping[str, Any]] = None
-    failure: Optional[Mapping[str, Any]] = None
+    failure: Optional[Failure] = None
     rho: Optional[float] = None
     reference: Optional[Mapping[str, Any]] = None
     avoidable: Optional[bool] = None
     trace: Optional[str] = None
     error: Optional[str] = None
     family: Optional[str] = None
-    behaviour: Optional[Mapping[str, Any]] = None
+    behaviour: Optional[Behaviour] = None
     failure_state: Optional[Tuple[float, ...]] = None
     worker_restarts: Optional[Tuple[Any, ...]] = None
     sampler: Optional[str] = None
@@ -545,8 +668,12 @@ class EpisodeRecord(JsonRecord):
         "worker_restarts": "list", "sampler": "str", "point": "any", "proposal": "any",
     }
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("index", "scenario", "seed")
+    _NESTED: ClassVar[Dict[str, type]] = {"failure": Failure, "behaviour": Behaviour}
     _LISTS: ClassVar[Tuple[str, ...]] = ("failure_state", "worker_restarts")
     _WHAT: ClassVar[str] = "episode record"
+
+    def __post_init__(self) -> None:
+        _read_nested(self)
 
     def default_null_fields(self) -> FrozenSet[str]:
         return frozenset(self._KINDS) - {"behaviour", "failure_state", "worker_restarts"}
@@ -569,7 +696,7 @@ class EpisodeRecord(JsonRecord):
     @property
     def failure_type(self) -> Optional[str]:
         """The failure's type (``"collision"``, ``"off_road"``, ``"stall"``, ``"low_ttc"``), or ``None``."""
-        return (self.failure or {}).get("type") if not self.error else None
+        return self.failure.type if self.failure is not None and not self.error else None
 
     @property
     def mean_speed(self) -> Optional[float]:
@@ -670,7 +797,7 @@ class HeldOutEpisode(JsonRecord):
     seed: int
     policy: Optional[str] = None
     failed: Optional[bool] = None
-    failure: Optional[Mapping[str, Any]] = None
+    failure: Optional[Failure] = None
     result: Optional[Mapping[str, Any]] = None
     error: Optional[str] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
@@ -681,7 +808,11 @@ class HeldOutEpisode(JsonRecord):
         "result": "object", "error": "str",
     }
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("role", "scenario", "seed")
+    _NESTED: ClassVar[Dict[str, type]] = {"failure": Failure}
     _WHAT: ClassVar[str] = "held-out episode"
+
+    def __post_init__(self) -> None:
+        _read_nested(self)
 
     def default_null_fields(self) -> FrozenSet[str]:
         return frozenset(self._KINDS)

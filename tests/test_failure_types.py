@@ -19,7 +19,7 @@ from dv2s_gym.regress import report as regress_report
 from envs.safety_metrics import MonitorSettings
 from envs.trace import EpisodeTrace
 from policies.evaluation import EpisodeResult
-from scenario_bank.records import RegressEpisode
+from scenario_bank.records import Failure, RegressEpisode
 from scenario_bank.failure_types import (FAILURE_TABLE, FAILURE_TYPES, FailureType, failure_table, failure_type,
                                          register_failure_type, severity_order, unregister_failure_type)
 from tests.test_mining_report import make_run
@@ -48,8 +48,8 @@ def test_the_public_names_are_the_table_read_by_each_part():
 
 
 def test_the_readers_order_by_the_table():
-    assert reference_avoids({"type": "collision"}, {"type": "stall"})  # a stall is less severe
-    assert not reference_avoids({"type": "stall"}, {"type": "off_road"})
+    assert reference_avoids(Failure("collision"), Failure("stall"))  # a stall is less severe
+    assert not reference_avoids(Failure("stall"), Failure("off_road"))
     result = failures.apply_failure({"collided": False, "off_road": True, "stalled": True}, ["off_road", "stall"])
     assert result["failure_kinds"] == ["off_road", "stall"] and result["failed"]
     assert failures.parse_failure("stall,collision") == ["collision", "stall"]
@@ -130,8 +130,7 @@ def test_a_failure_type_registered_in_one_place_is_detected_scored_and_counted(t
     assert monitors.detect_failure(*_episode([10.0, 9.0, 8.0])) is None  # gentle braking is no failure
     # avoidability reads the table: the reference driver's hard brake is less severe than a stall, and its stall
     # where the policy braked hard is not
-    assert reference_avoids({"type": "stall"}, {"type": TOY}) and not reference_avoids({"type": TOY},
-                                                                                        {"type": "stall"})
+    assert reference_avoids(Failure("stall"), Failure(TOY)) and not reference_avoids(Failure(TOY), Failure("stall"))
     # counted: the mining report's failures by type, in the table's order
     run = make_run(tmp_path / "run", clips=False)
     episodes = run / "episodes.jsonl"

@@ -57,12 +57,13 @@ def test_the_view_looks_ahead_only_as_far_as_the_actor_needs():
 
 def test_a_stall_clip_holds_the_car_the_ego_stood_behind():
     from dv2s_gym.mining.conversion.failure_video import VideoSettings, _camera
+    from scenario_bank.records import Failure
 
     # the ego stands; a car stopped 60 m ahead in its lane, another cruising by in the next lane
     states = [{"ego": [0.0, 0.0, 0.0, 0.0], "blocker": [60.0, 0.3, 0.0, 0.0], "passer": [-20.0 + 4 * k, 4.0, 0.0, 20.0]}
               for k in range(40)]
     trace = SimpleNamespace(states=states, events=[], config={"policy_frequency": 5})
-    stall = {"type": "stall", "step": 10, "time": 2.0, "with": None}
+    stall = Failure("stall", 2.0, 10)
     camera = _camera(trace, stall, 10, 5.0, True, VideoSettings(), 40)
     assert not _inside({}, (60.0, 0.3), 0) and _inside(camera, (60.0, 0.3), ACTOR_MARGIN)
 

@@ -28,7 +28,7 @@ from loop_helpers import written_report
 from policies.evaluation import trajectory_hash
 from scenario_bank.bank import Bank, Sidecar
 from scenario_bank.errors import WrongTypeError
-from scenario_bank.records import EpisodeRecord
+from scenario_bank.records import EpisodeRecord, Failure
 
 KEEP_LANE = ConversionSettings(policy="keep_lane")
 """The conversion settings of the tests: the deterministic policy that fails."""
@@ -55,7 +55,7 @@ def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane
     record = run_mine_task(MineTask(index=index, policy=policy, scenario=scenario, seed=seed, params=params,
                                     bank_dir=bank_dir,
                                     monitor=MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)).to_json())
-    assert record.error is None and record.failure["type"] == "collision", record
+    assert record.error is None and record.failure.type == "collision", record
     return {**record.to_dict(), "family": scenario_family(scenario, bank_dir)}  # as episodes.jsonl holds it
 
 
@@ -119,14 +119,14 @@ def test_a_diverging_replay_raises(record, tmp_path):
 
 
 def test_failure_class_rule():
-    rear = {"type": "collision", "with_kind": "car", "collision_type": "rear_end"}
-    assert same_failure_class(rear, {"type": "collision", "with_kind": "car", "collision_type": "rear_end"})
-    assert same_failure_class(rear, {"type": "collision", "with_kind": "car", "collision_type": None})
-    assert not same_failure_class(rear, {"type": "collision", "with_kind": "car", "collision_type": "side"})
-    assert not same_failure_class(rear, {"type": "collision", "with_kind": "pedestrian", "collision_type": "rear_end"})
-    assert not same_failure_class(rear, {"type": "off_road"})
+    rear = Failure("collision", with_kind="car", collision_type="rear_end")
+    assert same_failure_class(rear, Failure("collision", with_kind="car", collision_type="rear_end"))
+    assert same_failure_class(rear, Failure("collision", with_kind="car", collision_type=None))
+    assert not same_failure_class(rear, Failure("collision", with_kind="car", collision_type="side"))
+    assert not same_failure_class(rear, Failure("collision", with_kind="pedestrian", collision_type="rear_end"))
+    assert not same_failure_class(rear, Failure("off_road"))
     assert not same_failure_class(rear, None)
-    assert same_failure_class({"type": "stall"}, {"type": "stall", "time": 3.0})
+    assert same_failure_class(Failure("stall"), Failure("stall", 3.0))
     assert reproduction_seeds(7, 5) == reproduction_seeds(7, 5) != reproduction_seeds(8, 5)
     assert len(set(reproduction_seeds(7, 10))) == 10
 
@@ -181,7 +181,7 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert isinstance(replay.source.replay["not_narrowed"], dict)
     rerun = replay_failure(fresh, out.to_dict()["replay_entry"])
     assert rerun["matches"] and rerun["trajectory_hash"] == record["result"]["trajectory_hash"]
-    assert same_failure_class(record["failure"], rerun["failure"])
+    assert same_failure_class(Failure.of(record["failure"]), Failure.of(rerun["failure"]))
     entry = fresh.get(out.to_dict()["bank_entry"])
     source = entry.source
     assert source["kind"] == "mined" and source["parent"] == SCENARIO and source["seed"] == 0
@@ -478,13 +478,13 @@ def test_each_failed_check_of_the_judge_is_its_own_reason():
     interaction = {"kind": "car", "manoeuvres": ["brake", "stop"], "failure_type": "stall"}
     out = {"reproduction": {"k": 10, "reproduced": 2, "rate": 0.2, "interaction_shown": 1},
            "avoidability": {"reference": "rule", "k": 10, "failed": 6, "avoided_rate": 0.4}}
-    reasons = [str(r) for r in judge_conversion(out, interaction, {"type": "stall"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion(out, interaction, Failure("stall"), 0.3)]
     assert [r.split(":")[0] for r in reasons] == ["interaction", "reproduction", "avoidability"]
     assert "car (brake, stop) in 1 of 10" in reasons[0] and "stall failure with a car in 2 of 10" in reasons[1]
     assert "rule failed in 6 of 10" in reasons[2]
     passing = {"reproduction": {"k": 10, "reproduced": 3, "rate": 0.3, "interaction_shown": 3},
                "avoidability": {"reference": "rule", "k": 10, "failed": 4, "avoided_rate": 0.6}}
-    assert judge_conversion(passing, interaction, {"type": "stall"}, 0.3) == []
+    assert judge_conversion(passing, interaction, Failure("stall"), 0.3) == []
     # the reference avoiding it in half of the episodes is not "most"
     half = {**passing, "avoidability": {"reference": "rule", "k": 10, "failed": 5, "avoided_rate": 0.5}}
     assert [str(r).split(":")[0] for r in judge_conversion(half, interaction, {"type": "stall"}, 0.3)] == ["avoidability"]
@@ -545,18 +545,16 @@ def test_any_reference_failure_counts_against_the_new_scenario_whatever_its_clas
     from dv2s_gym.mining.conversion.episodes import reference_failed, reference_outcome
     from dv2s_gym.mining.conversion.judge import judge_conversion
 
-    rear = {"type": "collision", "with_kind": "car", "collision_type": "rear_end"}
-    behind = {"type": "collision", "with_kind": "car", "collision_type": "struck_from_behind",
-              "kind": "collision:struck_from_behind"}
-    stall = {"type": "stall", "kind": "stall"}
-    near_miss = {"type": "low_ttc", "kind": "low_ttc"}
+    rear = Failure("collision", with_kind="car", collision_type="rear_end")
+    behind = Failure("collision", with_kind="car", collision_type="struck_from_behind")
+    stall, near_miss = Failure("stall"), Failure("low_ttc")
     assert not same_failure_class(rear, behind)  # another class than the source's ...
     assert reference_failed(rear, behind) and reference_failed(rear, stall)  # ... still a failure of the reference
-    assert reference_failed(rear, {"type": "off_road", "kind": "off_road"})
+    assert reference_failed(rear, Failure("off_road"))
     assert not reference_failed(rear, None) and not reference_failed(rear, near_miss)
     assert reference_failed(near_miss, near_miss)  # the miner calls such a near miss unavoidable too
-    outcome = reference_outcome(rear, [{"failure": behind}, {"failure": behind}, {"failure": stall},
-                                       {"failure": near_miss}, {"failure": None}], "rule")
+    outcome = reference_outcome(rear, [{"failure": failure.to_dict() if failure else None}
+                                       for failure in (behind, behind, stall, near_miss, None)], "rule")
     assert outcome == {"reference": "rule", "k": 5, "failed": 3, "avoided_rate": pytest.approx(0.4),
                        "failures": {"collision:struck_from_behind": 2, "stall": 1}}
     out = {"reproduction": {"k": 5, "reproduced": 5, "rate": 1.0, "interaction_shown": 5}, "avoidability": outcome}

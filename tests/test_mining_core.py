@@ -739,7 +739,7 @@ def test_the_failure_state_descriptor_and_state_novelty_feedback():
     states = [{"ego": [float(i), 0.0, 0.0, 20.0 - max(0, i - 5)], "Car1": [10.0 + i, 0.0, 0.0, 5.0]}
               for i in range(11)]
     trace = SimpleNamespace(states=states, config={"policy_frequency": 5, "duration": 20.0})
-    state = failure_state(trace, {"type": "collision", "with": "Car1", "step": 10})
+    state = failure_state(trace, Failure.of({"type": "collision", "with": "Car1", "step": 10}))
     assert len(state) == STATE_SIZE
     assert state[:4] == pytest.approx([15.0 / 30, -5.0 / 10, 0.0, 10 / 100])
     assert state[4:] == pytest.approx([1.0, 10.0 / 30, 0.0, (5.0 - 15.0) / 20, 0.0])

@@ -14,6 +14,7 @@ from dv2s_gym.mining.conversion.interaction import (failure_interaction, interac
 from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from envs.trace import EpisodeTrace
+from scenario_bank.records import Failure
 
 DT = 0.2  # the env's default policy frequency, 5 Hz
 LANE = 4.0
@@ -64,7 +65,7 @@ def stall_behind_braking_car() -> EpisodeTrace:
     })
 
 
-STALL = {"type": "stall", "time": 5.0, "step": 25}
+STALL = Failure("stall", 5.0, 25)
 
 
 def cut_in_with_large_gap() -> EpisodeTrace:
@@ -78,7 +79,7 @@ def cut_in_with_large_gap() -> EpisodeTrace:
     }, events=[{"time": 2.4, "kind": "lane_change", "actors": ["cutter"], "direction": "right"}])
 
 
-CUT_IN = {"type": "low_ttc", "time": 5.6, "step": 28, "with": "cutter", "with_kind": "car", "min_ttc": 0.4}
+CUT_IN = Failure("low_ttc", 5.6, 28, with_="cutter", with_kind="car", min_ttc=0.4)
 
 
 def test_the_stall_names_the_braking_car_far_ahead():
@@ -144,8 +145,8 @@ def test_a_collision_is_shown_only_with_the_kind_colliding():
     assert shows_interaction(interaction, {**stopped, "actions": [["car", "stop"], ["car", "collide"]]})
 
 
-@pytest.mark.parametrize("failure", [{"type": "collision", "with": "lead", "step": 10},
-                                     {"type": "low_ttc", "with": "lead", "step": 10}])
+@pytest.mark.parametrize("failure", [Failure("collision", with_="lead", step=10),
+                                     Failure("low_ttc", with_="lead", step=10)])
 def test_the_partner_of_a_collision_or_low_ttc_is_the_key_actor(failure):
     assert key_actor(stall_behind_braking_car(), failure) == "lead"
 
@@ -179,7 +180,7 @@ def test_the_speed_an_impact_takes_away_is_no_braking_of_the_struck_car():
     from dv2s_gym.mining.monitors import Failure
 
     steady = _rear_end_into_steady_car(impact_drop=3.1)
-    failure = {"type": "collision", "with": "lead", "step": 20, "time": 4.0}
+    failure = Failure("collision", 4.0, 20, with_="lead")
     assert ["car", "brake"] not in elements_from_trace(steady)["actions"]
     assert "brake" not in failure_interaction(steady, failure).manoeuvres
     behaviour = extract_behaviour(steady, Failure(type="collision", time=4.0, step=20, with_="lead", with_kind="car"))
@@ -210,7 +211,7 @@ def test_a_car_beside_the_ego_does_not_show_a_stall_behind_a_car_in_its_lane():
 
     n = 40
     behind = _trace({"ego": _drive(0.0, 0.0, _ramp(25.0, 0.0, 0, 20, n)), "slow": _drive(40.0, 0.0, [0.0] * n)})
-    interaction = failure_interaction(behind, {"type": "stall", "step": n - 1})
+    interaction = failure_interaction(behind, Failure("stall", step=n - 1))
     assert (interaction.kind, interaction.side) == ("car", "same_lane")
     assert trace_shows_interaction(interaction, behind)
     beside = _trace({"ego": _drive(0.0, 0.0, _ramp(25.0, 0.0, 0, 20, n)), "other": _drive(40.0, LANE, [0.0] * n)})

@@ -46,7 +46,6 @@ TYPED_MODULES = ("mining.behaviour", "mining.cluster", "mining.family", "mining.
 JSON_BOUNDARIES: Dict[str, str] = {
     "mining.report.read_jsonl": "reads the JSON objects of a run's .jsonl files: the file format",
     "mining.report.build_report_from_records": "takes the run's settings.json as recorded (RunSettings.values)",
-    "mining.behaviour.Behaviour.from_dict": "reads the behaviour's JSON object, as report.json holds it",
     "mining.sampling.rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
     "loop.run.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
     "loop.run.untouched_settings": "takes the policy's env config, a JSON object of its model card",
@@ -504,3 +503,135 @@ def test_a_record_says_whether_it_holds_anything_and_round_trips():
     assert EpisodeRecord.from_dict(episode) == EpisodeRecord.from_dict(dict(episode))
     assert recorded(EpisodeRecord.from_dict(episode)) and EpisodeRecord.from_dict(episode).to_dict() == episode
 
+
+
+_FAILURE_KEYS = ("type", "time", "step", "with", "with_kind", "collision_type", "min_ttc", "speed", "kind", "actor",
+                 "actor_manoeuvre", "ego_manoeuvre")
+"""The JSON keys of a failure (:class:`~scenario_bank.records.Failure`) and a behaviour
+(:class:`~scenario_bank.records.Behaviour`)."""
+_HOLDERS = ("failure", "behaviour", "source_failure", "reference_failure", "ref_failure")
+"""Names of the values that hold a failure or a behaviour."""
+_FAILURE_READ_ALLOWED = {
+    "scenario_bank/records.py": "Provenance.failure_type reads a bank entry's provenance, whose failure is kept as the "
+                                "JSON object its sidecar holds",
+}
+"""Modules that may read a failure by key, with the reason."""
+
+
+def failure_key_reads(source: str) -> List[str]:
+    """The string-key reads of a failure's or a behaviour's JSON keys (``failure["kind"]``, ``record.failure.get(
+    "with")``, ``(record.behaviour or {}).get("actor")``) of a value named like :data:`_HOLDERS` in ``source``."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Subscript) and isinstance(node.ctx, ast.Load):
+            target, key = node.value, node.slice
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get" \
+                and node.args:
+            target, key = node.func.value, node.args[0]
+        else:
+            continue
+        if isinstance(target, ast.BoolOp):  # (record.failure or {}).get("type")
+            target = target.values[0]
+        if isinstance(target, ast.Call) and ast.unparse(target.func) == "dict" and target.args:
+            target = target.args[0]  # dict(record.failure or {})
+            target = target.values[0] if isinstance(target, ast.BoolOp) else target
+        name = ast.unparse(target).split(".")[-1]
+        if name in _HOLDERS and isinstance(key, ast.Constant) and key.value in _FAILURE_KEYS:
+            found.append(ast.unparse(node))
+    return found
+
+
+def test_the_failure_read_check_sees_a_failure_read_by_key():
+    planted = textwrap.dedent("""
+        def run(record, failure, source_failure):
+            failure["kind"] = "x"
+            return (record.failure["kind"], failure.get("with"), (record.behaviour or {}).get("actor"),
+                    source_failure["type"], record.failure.kind, record.reference.get("failure"),
+                    dict(record.failure or {}).get("step"), settings["type"])
+    """)
+    assert failure_key_reads(planted) == ["record.failure['kind']", "failure.get('with')",
+                                          "(record.behaviour or {}).get('actor')", "source_failure['type']",
+                                          "dict(record.failure or {}).get('step')"]
+
+
+def test_the_product_reads_failures_and_behaviours_by_their_fields():
+    """An episode record's failure and behaviour (and the failures the conversion and the loop pass on) are
+    records: no product module reads one by a JSON key."""
+    found = {}
+    for folder in ("dv2s_gym", "policies", "envs", "scenario_bank"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            where = path.relative_to(ROOT).as_posix()
+            if where in _FAILURE_READ_ALLOWED:
+                continue
+            reads = failure_key_reads(path.read_text(encoding="utf-8"))
+            if reads:
+                found[where] = reads
+    assert not found, f"{found} read a failure or a behaviour by key: read the record's fields (failure.kind)"
+    assert failure_key_reads((ROOT / "scenario_bank/records.py").read_text(encoding="utf-8")) == [
+        "(self.failure or {}).get('type')"]  # Provenance.failure_type, the one allowed
+
+
+def test_a_failure_and_behaviour_the_miner_writes_read_back_equal(tmp_path):
+    """The miner's episode record of a failure (its worker's, written to episodes.jsonl and read back) holds a
+    Failure and a Behaviour, is equal to what was written, and writes back the same bytes, keys in the order the
+    monitors have always written them."""
+    from dv2s_gym.mining.jsonl import JsonlAppender
+    from dv2s_gym.mining.miner import read_records
+    from dv2s_gym.mining.monitors import MonitorSettings
+    from dv2s_gym.mining.tasks import MineTask, run_mine_task
+    from scenario_bank.records import Behaviour, EpisodeRecord, Failure
+
+    record = run_mine_task(MineTask(index=0, policy="keep_lane", scenario="urban_lead_vehicle_stopped", seed=0,
+                                    reference="rule", monitor=MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0))
+                           .to_json())
+    assert record.error is None and isinstance(record.failure, Failure) and isinstance(record.behaviour, Behaviour)
+    assert record.failure.type == "collision" and record.failure.kind.startswith("collision")
+    path = tmp_path / "episodes.jsonl"
+    appender = JsonlAppender(path)
+    appender.append(record)
+    appender.close()
+    written = path.read_bytes()
+    (read,) = read_records(path)
+    assert isinstance(read.failure, Failure) and isinstance(read.behaviour, Behaviour)
+    assert read == record and read.failure == record.failure and read.behaviour == record.behaviour
+    assert (read.failure.kind, read.failure.with_, read.behaviour.actor) == (
+        record.failure.kind, record.failure.with_, record.behaviour.actor)
+    assert json.dumps(read.to_dict(), sort_keys=True).encode("utf-8") == written.strip()
+    # the JSON objects' keys in the order the monitors and the behaviour have always written them (the file sorts
+    # them), as written and as read back
+    for episode in (record, read):
+        assert list(episode.to_dict()["failure"]) == ["type", "time", "step", "with_kind", "collision_type",
+                                                      "min_ttc", "speed", "with", "kind"]
+        assert list(episode.to_dict()["behaviour"]) == ["actor", "actor_manoeuvre", "ego_manoeuvre"]
+    saved = json.loads(written)
+    assert EpisodeRecord.from_dict(saved).to_dict() == saved
+
+
+def test_a_failure_and_behaviour_keep_what_their_json_held():
+    """Absent keys stay absent, nulls stay null, a plug-in's keys travel in ``extra``; a record built from the
+    JSON object reads it into the records."""
+    from scenario_bank.records import Behaviour, EpisodeRecord, Failure, HeldOutEpisode, RecordError
+
+    partial = {"type": "collision", "time": 2.0, "with": None, "kind": "collision:rear_end", "jerk": 9.5}
+    failure = Failure.from_dict(partial)
+    assert failure.to_dict() == partial and list(failure.to_dict()) == ["type", "time", "with", "kind", "jerk"]
+    assert failure.kind == "collision:rear_end" and failure.extra == {"jerk": 9.5} and failure.step is None
+    assert Failure("collision", 1.0, 5, collision_type="side").kind == "collision:side"
+    assert Failure.of(None) is None and Failure.of({}) is None and Failure.of(partial) == failure
+    filled = failure.completed_by(Failure("collision", 2.0, 10, "lead", "car", "rear_end", 0.5, 8.0))
+    assert (filled.step, filled.with_, filled.speed, filled.extra) == (10, "lead", 8.0, {"jerk": 9.5})
+    assert set(filled.to_dict()) == {"type", "time", "step", "with_kind", "collision_type", "min_ttc", "speed",
+                                     "with", "kind", "jerk"}
+    behaviour = Behaviour.from_dict({"actor": "car", "ego_manoeuvre": None})
+    assert behaviour.to_dict() == {"actor": "car", "ego_manoeuvre": None}
+    assert behaviour.complete() == Behaviour("car", "unknown", "unknown")
+    episode = {"index": 1, "scenario": "s", "seed": 2, "failure": partial, "behaviour": {"actor": "car"}}
+    built = EpisodeRecord(index=1, scenario="s", seed=2, failure=partial, behaviour={"actor": "car"})
+    assert isinstance(built.failure, Failure) and isinstance(built.behaviour, Behaviour)
+    assert EpisodeRecord.from_dict(episode).to_dict() == {**EpisodeRecord.from_dict(episode).to_dict(), **episode}
+    held = HeldOutEpisode.from_dict({"role": "before", "scenario": "s", "seed": 1, "failure": partial})
+    assert held.failure == failure and held.to_dict()["failure"] == partial
+    with pytest.raises(RecordError, match="episode record field 'failure.type' is missing"):
+        EpisodeRecord.from_dict({**episode, "failure": {"kind": "collision"}})
+    with pytest.raises(RecordError, match="'failure.step' must be an integer"):
+        EpisodeRecord.from_dict({**episode, "failure": {"type": "collision", "step": "ten"}})

@@ -66,10 +66,10 @@ def _replay_mined(args: argparse.Namespace, folder) -> int:
     from dv2s_gym.mining.episode_replay import replay_mined_episode
 
     record, policy = replay_mined_episode(folder, args.episode, policy=args.policy_spec, video=args.video)
-    failure = record.failure or {}
+    failure = record.failure
     print(f"episode {record.index} ({record.scenario}, seed {record.seed}): {policy} re-run "
           f"with the recorded parameters; trajectory hash {record.result['trajectory_hash'][:16]} matches the record"
-          + (f"; failure {failure.get('kind')} at {failure.get('time')} s" if failure else "")
+          + (f"; failure {failure.kind} at {failure.time} s" if failure is not None else "")
           + (f"; video {args.video}" if args.video else ""))
     return 0
 

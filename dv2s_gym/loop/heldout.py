@@ -178,7 +178,6 @@ def failure_types(records: Iterable[HeldOutEpisode]) -> Dict[str, int]:
     """How many records failed with each failure type."""
     counts: Dict[str, int] = {}
     for record in records:
-        failure = record.failure
-        if failure:
-            counts[failure.get("type", "?")] = counts.get(failure.get("type", "?"), 0) + 1
+        if record.failure is not None:
+            counts[record.failure.type] = counts.get(record.failure.type, 0) + 1
     return counts

@@ -864,7 +864,7 @@ def reference_gate(records: Sequence[HeldOutEpisode], families: Mapping[str, str
             kind = "error"
         else:
             failed += 1
-            kind = str((record.failure or {}).get("type") or "failure")
+            kind = record.failure.type if record.failure is not None else "failure"
         row["failures"][kind] = row["failures"].get(kind, 0) + 1
     return ReferenceGate(reference=REFERENCE_DRIVER, episodes=len(records), kept=len(records) - len(excluded),
                          excluded=tuple(excluded), failed=failed, errored=errored,

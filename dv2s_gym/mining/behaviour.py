@@ -2,8 +2,9 @@
 
 :func:`extract_behaviour` reads an episode's trace (:class:`~envs.trace.EpisodeTrace`: every actor's
 ``[x, y, heading, speed]`` after every step, and each actor's kind) and its
-:class:`~dv2s_gym.mining.monitors.Failure`, and returns a :class:`Behaviour`, whose JSON object
-(:meth:`Behaviour.to_dict`) the miner keeps in the episode record (``behaviour``)::
+:class:`~dv2s_gym.mining.monitors.Failure`, and returns a :class:`Behaviour` (a record of
+:mod:`scenario_bank.records`, importable from here too), which the miner keeps in the episode record
+(``behaviour``); its JSON object (:meth:`Behaviour.to_dict`)::
 
     {"actor": kind of the other actor involved ("car", "truck", "pedestrian", ...) or "none",
      "actor_manoeuvre": "crossing" | "oncoming" | "stopped" | "cut_in" | "lane_change" | "braking"
@@ -32,11 +33,10 @@ without another actor (``off_road``), have actor ``"none"``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional
 
 from dv2s_gym.mining.monitors import Failure
-from scenario_bank.records import EpisodeRecord
+from scenario_bank.records import UNKNOWN_PART, Behaviour, EpisodeRecord
 
 __all__ = ["Behaviour", "extract_behaviour", "behaviour_of", "actor_ahead", "involved_actor", "WAITING_DISTANCE", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
            "BRAKING_DROP", "ACTOR_MANOEUVRES", "EGO_MANOEUVRES"]
@@ -58,28 +58,7 @@ LANE_HALF_WIDTH = 2.0
 """Metres to either side of the ego's heading line that count as its lane (half a 4 m lane)."""
 
 
-@dataclass(frozen=True)
-class Behaviour:
-    """What happened in a failure: the kind of the other ``actor`` involved (``"car"``, ``"truck"``,
-    ``"pedestrian"``, ...; ``"none"`` without one), what it was doing (``actor_manoeuvre``, one of
-    :data:`ACTOR_MANOEUVRES`) and what the ego was doing (``ego_manoeuvre``, one of :data:`EGO_MANOEUVRES`); each is
-    ``"unknown"`` where the record or trace cannot tell it."""
-
-    actor: str
-    actor_manoeuvre: str
-    ego_manoeuvre: str
-
-    def to_dict(self) -> Dict[str, str]:
-        """The JSON object of the behaviour, as episode records and reports hold it."""
-        return {"actor": self.actor, "actor_manoeuvre": self.actor_manoeuvre, "ego_manoeuvre": self.ego_manoeuvre}
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "Behaviour":
-        """The behaviour of its JSON object (:meth:`to_dict`); a part it does not hold is ``"unknown"``."""
-        return cls(**{key: str(data.get(key) or "unknown") for key in ("actor", "actor_manoeuvre", "ego_manoeuvre")})
-
-
-UNKNOWN = Behaviour(actor="unknown", actor_manoeuvre="unknown", ego_manoeuvre="unknown")
+UNKNOWN = Behaviour(actor=UNKNOWN_PART, actor_manoeuvre=UNKNOWN_PART, ego_manoeuvre=UNKNOWN_PART)
 """The behaviour of a failure whose record and trace cannot tell it."""
 
 
@@ -199,12 +178,6 @@ def extract_behaviour(trace: Any, failure: Optional[Failure]) -> Optional[Behavi
 
 
 def behaviour_of(record: EpisodeRecord) -> Behaviour:
-    """The behaviour of a failed episode record (:data:`UNKNOWN` parts where it has none)."""
-    found = record.behaviour
-    if not isinstance(found, Mapping):
-        return UNKNOWN
-    return Behaviour(actor=str(found.get("actor") or UNKNOWN.actor),
-                     actor_manoeuvre=str(found.get("actor_manoeuvre") or UNKNOWN.actor_manoeuvre),
-                     ego_manoeuvre=str(found.get("ego_manoeuvre") or UNKNOWN.ego_manoeuvre))
-
-
+    """The behaviour of a failed episode record, ``"unknown"`` in each part it does not tell
+    (:meth:`Behaviour.complete`; :data:`UNKNOWN` when it has none)."""
+    return record.behaviour.complete() if record.behaviour is not None else UNKNOWN

@@ -41,18 +41,18 @@ def region_of(point: Sequence[float], bins: int = REGION_BINS) -> str:
 def cluster_id(record: EpisodeRecord) -> str:
     """The behaviour cluster of a failed episode record (module docstring)."""
     behaviour = behaviour_of(record)
-    return (f"{record_family(record)}/{record.failure['kind']}/{behaviour.actor}-{behaviour.actor_manoeuvre}"
+    return (f"{record_family(record)}/{record.failure.kind}/{behaviour.actor}-{behaviour.actor_manoeuvre}"
             f"/ego-{behaviour.ego_manoeuvre}")
 
 
 def cell_id(record: EpisodeRecord, bins: int = REGION_BINS) -> str:
     """``"<scenario>/<failure class>/<grid cell>"`` of a failed record: where in parameter space it failed."""
-    return f"{record.scenario}/{record.failure['kind']}/{region_of(record.point or [], bins)}"
+    return f"{record.scenario}/{record.failure.kind}/{region_of(record.point or [], bins)}"
 
 
 def pair_of(record: EpisodeRecord) -> str:
     """``"<family>/<failure class>"`` of a failed record."""
-    return f"{record_family(record)}/{record.failure['kind']}"
+    return f"{record_family(record)}/{record.failure.kind}"
 
 
 def cluster_failures(records: Iterable[EpisodeRecord]) -> Dict[int, str]:

@@ -21,7 +21,9 @@ different clusters close.
 from __future__ import annotations
 
 import math
-from typing import Any, List, Mapping, Optional, Sequence
+from typing import Any, List, Optional, Sequence
+
+from scenario_bank.records import Failure
 
 __all__ = ["failure_state", "distance", "is_novel", "NOVELTY_RADIUS", "STATE_SIZE"]
 
@@ -35,10 +37,10 @@ def _clip(value: float) -> float:
     return max(-1.0, min(1.0, float(value)))
 
 
-def failure_state(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[List[float]]:
-    """The descriptor (module docstring) of ``failure`` (a ``Failure.to_json()`` dict) in ``trace``; ``None``
-    without a failure or without states."""
-    if not failure:
+def failure_state(trace: Any, failure: Optional[Failure]) -> Optional[List[float]]:
+    """The descriptor (module docstring) of ``failure`` in ``trace``; ``None`` without a failure or without
+    states."""
+    if failure is None:
         return None
     states = list(getattr(trace, "states", None) or [])
     if not states:
@@ -46,7 +48,7 @@ def failure_state(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[
     config = getattr(trace, "config", None) or {}
     frequency = float(config.get("policy_frequency", 5) or 5)
     duration = float(config.get("duration", 20.0) or 20.0)
-    step = failure.get("step")
+    step = failure.step
     step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
     now = states[step]
     ego = now.get("ego")
@@ -58,7 +60,7 @@ def failure_state(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[
     sideways = -(ego[0] - two[0]) * math.sin(two[2]) + (ego[1] - two[1]) * math.cos(two[2])
     vector = [_clip(ego[3] / 30.0), _clip((ego[3] - second[3]) / 10.0), _clip(abs(sideways) / 4.0),
               _clip(step / (duration * frequency))]
-    named = failure.get("with")
+    named = failure.with_
     others = {name: state for name, state in now.items() if name != "ego" and state}
     if named in others:
         name, own = named, 1.0

@@ -161,8 +161,8 @@ class MineRun:
         errors = len(self.errors)
         restarted = sum(1 for r in self.records if r.worker_restarts)
         failures = self.failures
-        kinds = Counter(r.failure["kind"] for r in failures)
-        kinds_by_type = Counter(r.failure["type"] for r in failures)
+        kinds = Counter(r.failure.kind for r in failures)
+        kinds_by_type = Counter(r.failure.type for r in failures)
         avoidable_clusters = {self.clusters[int(r.index)] for r in self.avoidable}
         status = Counter(c.status for c in self.conversions)
         lines = [
@@ -177,7 +177,7 @@ class MineRun:
             f"{self.distinct_clusters} distinct behaviours"
             # without a reference driver no failure is known to be avoidable: no count of them
             + (f", {len(avoidable_clusters)} with avoidable failures" if self.settings.reference else "") + "; "
-            f"{len({(record_family(r), r.failure['kind']) for r in failures})} (scenario family, failure type) "
+            f"{len({(record_family(r), r.failure.kind) for r in failures})} (scenario family, failure type) "
             f"pairs, {len({record_family(r) for r in failures})} scenario families with a failure; "
             f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
         ]

@@ -15,7 +15,8 @@ its :class:`~envs.trace.EpisodeTrace` and returns the first failure by severity:
 :func:`robustness` turns the outcome into one number for VerifAI's adaptive samplers:
 negative for a failure (the more negative, the worse), positive otherwise.
 
-Both walk the failure table (:func:`scenario_bank.failure_types.failure_table`): each type has one
+A failure is a :class:`~scenario_bank.records.Failure` record (importable from here too), the one episode records
+hold. Both walk the failure table (:func:`scenario_bank.failure_types.failure_table`): each type has one
 :class:`Detector` in :data:`DETECTORS` that finds it and scores it. A new failure type is its row (with its
 label) in ``scenario_bank/failure_types.py`` and its detector here; a plug-in adds both at run time with
 :func:`~scenario_bank.failure_types.register_failure_type` and :func:`register_detector`, from an importable
@@ -27,7 +28,7 @@ it before its first episode (:mod:`scenario_bank.plugins`). The settings the mon
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from envs.safety_metrics import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, FREE_PATH, STANDING_SPEED,
@@ -37,6 +38,7 @@ from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, Unknow
                                           detach_detection, failure_table, failure_type, type_label)
 from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import forget_plugin, remember_plugin
+from scenario_bank.records import Failure
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "COLLISION_LABELS", "kind_label", "MonitorSettings",
            "Detector", "DETECTORS", "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
@@ -51,41 +53,6 @@ STALL_SPEED = STANDING_SPEED
 """m/s under which the ego counts as standing."""
 _VEHICLES = (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BICYCLE, ActorKind.MOTORCYCLE, None)
 """The kinds (and no kind) a collision is typed by the actors' headings for; the others count as obstacles."""
-
-
-@dataclass
-class Failure:
-    """One failure of an episode (see the module docstring for the fields' meaning)."""
-
-    type: str
-    time: float
-    step: int
-    with_: Optional[str] = None
-    with_kind: Optional[str] = None
-    collision_type: Optional[str] = None
-    min_ttc: Optional[float] = None
-    speed: Optional[float] = None
-    """The ego's speed [m/s] at the failure."""
-
-    @property
-    def kind(self) -> str:
-        """``type`` refined by the collision type: the failure class a reproduction must show."""
-        return f"{self.type}:{self.collision_type}" if self.collision_type else self.type
-
-    def to_json(self) -> Dict[str, Any]:
-        """JSON-safe dict; ``with_`` is stored as ``with``."""
-        data = asdict(self)
-        data["with"] = data.pop("with_")
-        data["kind"] = self.kind
-        return data
-
-    @classmethod
-    def from_json(cls, data: Dict[str, Any]) -> "Failure":
-        """Inverse of :meth:`to_json`."""
-        data = dict(data)
-        data["with_"] = data.pop("with", None)
-        data.pop("kind", None)
-        return cls(**data)
 
 
 def _wrap(angle: float) -> float:

@@ -27,7 +27,7 @@ from dv2s_gym.mining.behaviour import Behaviour, behaviour_of
 from dv2s_gym.mining.conversion.record import ConversionRecord
 from dv2s_gym.mining.family import record_family
 from scenario_bank.errors import WrongTypeError
-from scenario_bank.records import EpisodeRecord, JsonRecord
+from scenario_bank.records import EpisodeRecord, Failure, JsonRecord
 
 __all__ = ["MineReport", "MineCounts", "SamplerSummary", "ScenarioSummary", "FailureEntry", "ClusterEntry",
            "RejectedConversion", "EpisodeError", "WorkerRestart", "mine_report"]
@@ -148,7 +148,7 @@ class ScenarioSummary(JsonRecord):
 def _behaviour(data: Mapping[str, Any]) -> Dict[str, Any]:
     """The :class:`Behaviour` of a record's ``behaviour`` JSON object (none when it has none)."""
     value = data.get("behaviour")
-    return {"behaviour": Behaviour.from_dict(value)} if isinstance(value, Mapping) else {}
+    return {"behaviour": Behaviour.from_dict(value).complete()} if isinstance(value, Mapping) else {}
 
 
 def _behaviour_json(record: Any, out: Dict[str, Any]) -> Dict[str, Any]:
@@ -216,12 +216,13 @@ class FailureEntry(JsonRecord):
     def of(cls, record: EpisodeRecord, cluster: Optional[str], default_sampler: str) -> "FailureEntry":
         """The entry of the failed episode ``record`` in ``cluster`` (``default_sampler``: the run's sampler, for a
         record that does not name its own)."""
-        failure = record.failure or {}
+        # a record without a failure (the report lists none) would list the type "None", as str(None) reads
+        failure = record.failure if record.failure is not None else Failure(type="None", null_fields=frozenset())
         return cls(index=int(record.index), sampler=str(record.sampler or default_sampler), scenario=record.scenario,
                    family=record_family(record), seed=record.seed, params=dict(record.params or {}),
-                   type=str(failure.get("type")), kind=str(failure.get("kind") or failure.get("type")),
-                   time=failure.get("time"), with_actor=failure.get("with"), with_kind=failure.get("with_kind"),
-                   collision_type=failure.get("collision_type"), min_ttc=failure.get("min_ttc"), rho=record.rho,
+                   type=failure.type, kind=failure.kind, time=failure.time, with_actor=failure.with_,
+                   with_kind=failure.with_kind, collision_type=failure.collision_type, min_ttc=failure.min_ttc,
+                   rho=record.rho,
                    avoidable=record.avoidable, reference=record.reference, cluster=cluster,
                    behaviour=behaviour_of(record), trace=record.trace)
 

@@ -7,6 +7,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from dv2s_gym.mining.report_record import MineCounts
 from scenario_bank.failure_types import severity_order, type_label
+from scenario_bank.records import Failure
 
 __all__ = ["replaced_text", "replaced_in", "breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
            "NOT_COMPARED_REASONS", "not_compared_reason", "not_compared_counts", "not_compared_text",
@@ -188,15 +189,15 @@ def clip_caption(scenario: str, source: Mapping[str, Any], *, merged: bool = Fal
     text = f"{what} driven by {policy or 'the policy'}"
     if clip.get("seed") is not None:
         text += f", seed {clip['seed']}"
-    failure = clip.get("failure") or {}
+    failure = Failure.of(clip.get("failure"))
     if not clip:
         return text
     if not clip.get("failed"):
         return text + ": it did not fail"
-    how = str(failure.get("type") or "failed")
-    if failure.get("collision_type"):
-        how += f" ({failure['collision_type']})"
-    if failure.get("with_kind"):
-        how += f" with a {failure['with_kind']}"
+    how = failure.type if failure is not None else "failed"
+    if failure is not None and failure.collision_type:
+        how += f" ({failure.collision_type})"
+    if failure is not None and failure.with_kind:
+        how += f" with a {failure.with_kind}"
     same = "the same way as the source failure" if clip.get("reproduced") else "another way than the source failure"
     return text + f": it failed, {how}, {same}"

@@ -32,7 +32,7 @@ from dv2s_gym.mining.behaviour import extract_behaviour
 from dv2s_gym.mining.failure_state import failure_state
 from dv2s_gym.mining.write_errors import write_failure
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.monitors import (DEFAULT_MONITOR, MonitorSettings, detect_failure, robustness,
+from dv2s_gym.mining.monitors import (DEFAULT_MONITOR, Failure, MonitorSettings, detect_failure, robustness,
                                       types_without_detector)
 from dv2s_gym.workers.tasks import register, task_id
 from policies import worker_cache
@@ -107,13 +107,13 @@ def trace_name(index: int) -> str:
     return f"{index:06d}.json.gz"
 
 
-def reference_avoids(failure: Optional[Dict[str, Any]], reference_failure: Optional[Dict[str, Any]]) -> bool:
+def reference_avoids(failure: Optional[Failure], reference_failure: Optional[Failure]) -> bool:
     """True when the reference driver's outcome is less severe than the policy's failure."""
     if failure is None:
         return True
     if reference_failure is None:
         return True
-    return _severity(reference_failure["type"]) > _severity(failure["type"])
+    return _severity(reference_failure.type) > _severity(failure.type)
 
 
 def _severity(name: str) -> int:
@@ -156,13 +156,12 @@ def run_mine_task(task: Mapping[str, Any]) -> EpisodeRecord:
         result, trace = _episode(mine, mine.policy)
         failure = detect_failure(result, trace, mine.monitor)
         outcome["result"] = result.to_json()
-        outcome["failure"] = failure.to_json() if failure else None
+        outcome["failure"] = failure
         outcome["rho"] = robustness(result, failure, mine.monitor)
         if failure is not None:
             nulls = nulls | {"behaviour", "failure_state"}
-            behaviour = extract_behaviour(trace, failure)
-            outcome["behaviour"] = behaviour.to_dict() if behaviour is not None else None
-            outcome["failure_state"] = failure_state(trace, outcome["failure"])
+            outcome["behaviour"] = extract_behaviour(trace, failure)
+            outcome["failure_state"] = failure_state(trace, failure)
             if mine.trace_dir:
                 path = os.path.join(mine.trace_dir, trace_name(mine.index))
                 try:
@@ -172,8 +171,8 @@ def run_mine_task(task: Mapping[str, Any]) -> EpisodeRecord:
                     return _mine_record(scene, outcome, extra, nulls)
                 outcome["trace"] = path
             if mine.reference:
-                outcome["reference"] = _reference_outcome(mine)
-                outcome["avoidable"] = reference_avoids(outcome["failure"], outcome["reference"]["failure"])
+                outcome["reference"], reference_failure = _reference_outcome(mine)
+                outcome["avoidable"] = reference_avoids(failure, reference_failure)
     except Exception as error:  # reported in the record, never dropped
         message = " ".join(f"{type(error).__name__}: {error}".split())
         if os.environ.get("DV2S_DEBUG"):
@@ -182,13 +181,13 @@ def run_mine_task(task: Mapping[str, Any]) -> EpisodeRecord:
     return _mine_record(scene, outcome, extra, nulls)
 
 
-def _reference_outcome(task: MineTask) -> Dict[str, Any]:
-    """The reference driver's episode on the task's scene, as the record's ``reference``."""
+def _reference_outcome(task: MineTask) -> Tuple[Dict[str, Any], Optional[Failure]]:
+    """The reference driver's episode on the task's scene, as the record's ``reference``, and its failure."""
     ref_result, ref_trace = _episode(task, task.reference)
     ref_failure = detect_failure(ref_result, ref_trace, task.monitor)
     return {"policy": task.reference, "failure": ref_failure.to_json() if ref_failure else None,
             "trajectory_hash": ref_result.trajectory_hash, "collided": ref_result.collided,
-            "min_ttc": ref_result.to_json()["min_ttc"]}
+            "min_ttc": ref_result.to_json()["min_ttc"]}, ref_failure
 
 
 def _check_detects(names) -> None:
@@ -209,11 +208,6 @@ def _mine_record(scene: Dict[str, Any], outcome: Dict[str, Any], extra: Dict[str
     return EpisodeRecord(**values, extra=extra, null_fields=nulls)
 
 
-def _heldout_failure(result, trace, monitor: MonitorSettings) -> Optional[Dict[str, Any]]:
-    failure = detect_failure(result, trace, monitor)
-    return None if failure is None else failure.to_json()
-
-
 def heldout_task(task: Mapping[str, Any]) -> HeldOutEpisode:
     """Run one episode in this process: ``task`` has role, policy, scenario, seed, bank_dir,
     env_config, monitor (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`). Returns its
@@ -226,7 +220,7 @@ def heldout_task(task: Mapping[str, Any]) -> HeldOutEpisode:
         env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
         policy = worker_cache.policy_for(task["policy"], env_key, env)
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
-        failure = _heldout_failure(result, trace, task.get("monitor") or DEFAULT_MONITOR)
+        failure = detect_failure(result, trace, task.get("monitor") or DEFAULT_MONITOR)
     except Exception as error:  # reported, never counted as a failure of the policy
         if env_key is not None:
             worker_cache.drop_env(env_key)

@@ -92,7 +92,7 @@ from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.bank import Bank
-from scenario_bank.records import EpisodeRecord, Provenance, Sidecar
+from scenario_bank.records import EpisodeRecord, Failure, Provenance, Sidecar
 
 __all__ = ["convert_failure", "replay_failure_entry"]
 
@@ -116,6 +116,15 @@ def _portable_params(params: Mapping[str, Any]) -> Dict[str, Any]:
     if isinstance(out.get("map"), str) and ("/" in out["map"] or os.sep in out["map"]):
         out["map"] = Path(out["map"]).name
     return out
+
+
+def _clip_failure(failure: Optional[Failure]) -> Optional[Dict[str, Any]]:
+    """What the clip's record says of the filmed episode's failure: its type, collision type and the other actor's
+    kind, those it has."""
+    if failure is None:
+        return None
+    parts = {"type": failure.type, "collision_type": failure.collision_type, "with_kind": failure.with_kind}
+    return {key: value for key, value in parts.items() if value is not None}
 
 
 def _mined_name(parent: str, failure_type: str) -> str:
@@ -217,10 +226,10 @@ class _Conversion:
 
     def _input(self) -> None:
         self.stage = "input"
-        self.source_failure = dict(self.record.failure or {})
+        self.source_failure = self.record.failure
         k, threshold = self.settings.k, self.settings.threshold
-        if not self.source_failure.get("type"):
-            raise ConversionRejected("input", "the record holds no failure (record['failure'] is empty)")
+        if self.source_failure is None or not self.source_failure.type:
+            raise ConversionRejected("input", "the record holds no failure (its 'failure' is empty)")
         if int(k) < 1 or not 0.0 <= float(threshold) <= 1.0:
             raise ConversionRejected("input", f"the reproduction check needs k >= 1 and 0 <= threshold <= 1, not "
                                               f"k={k}, threshold={threshold}")
@@ -249,11 +258,9 @@ class _Conversion:
         self.out["video"] = run_relative(self.video, self.run_dir)
         self.source_trace = self.written.trace
         detected = detected_failure(self.written.result, self.source_trace, self.settings.monitor)
-        self.details["source_failure_detected"] = detected
-        if detected and detected.get("type") == self.source_failure["type"]:
-            for key, value in detected.items():  # fill what a minimal failure record leaves out
-                if self.source_failure.get(key) is None:
-                    self.source_failure[key] = value
+        self.details["source_failure_detected"] = detected.to_dict() if detected is not None else None
+        if detected is not None and detected.type == self.source_failure.type:
+            self.source_failure = self.source_failure.completed_by(detected)  # what a minimal record leaves out
         self.lap("video")
 
     def _interaction(self) -> None:
@@ -382,10 +389,9 @@ class _Conversion:
         if not episodes:
             return
         episode, chosen = clip_episode(episodes)
-        failure = episode.get("failure") or None
-        clip = {"seed": int(episode["seed"]), "failed": bool(failure), "reproduced": bool(episode.get("reproduced")),
-                "failure": ({key: failure.get(key) for key in ("type", "collision_type", "with_kind")
-                             if failure.get(key) is not None} if failure else None),
+        failure = Failure.of(episode.get("failure"))
+        clip = {"seed": int(episode["seed"]), "failed": failure is not None,
+                "reproduced": bool(episode.get("reproduced")), "failure": _clip_failure(failure),
                 "chosen": chosen, "file": ENTRY_CONVERTED_VIDEO}
         path = self.conversion / ENTRY_CONVERTED_VIDEO
         try:
@@ -408,11 +414,11 @@ class _Conversion:
         if self.clip_path is not None:
             files[ENTRY_CONVERTED_VIDEO] = self.clip_path
         fields = Sidecar(description=self.description.text,
-                         name=_mined_name(record.scenario, self.source_failure["type"]),
-                         elements=self.description.elements, tags=("mined", self.source_failure["type"]),
+                         name=_mined_name(record.scenario, self.source_failure.type),
+                         elements=self.description.elements, tags=("mined", self.source_failure.type),
                          source=self._provenance())
         outcome = self.bank.add(self.generation.script, fields, files=files, on_duplicate="merge",
-                                near_copy_of=_family(record.scenario, self.source_failure["type"]))
+                                near_copy_of=_family(record.scenario, self.source_failure.type))
         if outcome.status == "added":
             out.update(status=ConversionStatus.KEPT.value, bank_entry=outcome.entry.name)
         else:
@@ -431,7 +437,7 @@ class _Conversion:
             video=ENTRY_VIDEO, trace=ENTRY_TRACE,
             **conversion_provenance(s.dra, s.sg, self.generation, self.description),
             backends={"dra": s.dra, "sg": s.sg},
-            policy=policy_name(s.policy), failure=self.source_failure, cluster=self.cluster,
+            policy=policy_name(s.policy), failure=self.source_failure.to_dict(), cluster=self.cluster,
             reproduction=out["reproduction"], e2e_sc=out["e2e_sc"], run=str(self.run_dir.resolve()),
             index=record.index,
             interaction=self.interaction.to_dict(), judge={"avoidability": out.get("avoidability"),

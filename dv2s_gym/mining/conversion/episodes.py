@@ -28,34 +28,35 @@ from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline.semantics.trace import trace_actor_kind
 from policies.evaluation import run_episode
 from policies.registry import load_policy
-from scenario_bank.records import EpisodeRecord, recorded
+from scenario_bank.records import EpisodeRecord, Failure, recorded
 
 __all__ = ["same_failure_class", "reference_failed", "reference_passed", "reference_outcome", "reproduction_seeds",
            "detected_failure", "monitor_options", "policy_name", "video_settings", "reproduce", "clip_episode",
            "actor_census", "compare_actors"]
 
 
-def same_failure_class(source: Mapping[str, Any], candidate: Optional[Mapping[str, Any]]) -> bool:
-    """Whether ``candidate`` (a failure dict, or None) is in the failure class of ``source`` (see the module doc)."""
-    if not candidate or candidate.get("type") != source.get("type"):
+def same_failure_class(source: Failure, candidate: Optional[Failure]) -> bool:
+    """Whether ``candidate`` (a failure, or None) is in the failure class of ``source`` (see the module doc)."""
+    if candidate is None or candidate.type != source.type:
         return False
-    if source.get("type") == "collision":
-        for key in ("with_kind", "collision_type"):
-            if source.get(key) is not None and candidate.get(key) is not None and source[key] != candidate[key]:
+    if source.type == "collision":
+        for mine, theirs in ((source.with_kind, candidate.with_kind),
+                             (source.collision_type, candidate.collision_type)):
+            if mine is not None and theirs is not None and mine != theirs:
                 return False
     return True
 
 
-def reference_failed(source: Mapping[str, Any], reference_failure: Optional[Mapping[str, Any]]) -> bool:
+def reference_failed(source: Optional[Failure], reference_failure: Optional[Failure]) -> bool:
     """Whether the reference driver's episode counts as failing the new scenario: any collision, off-road or
     stall, whatever its class, and a near miss (``low_ttc``) when the source failure is no more severe than a
     near miss (the miner's avoidability, :func:`dv2s_gym.mining.tasks.reference_avoids`, would then call the
     source failure unavoidable too)."""
-    if not reference_failure or not reference_failure.get("type"):
+    if reference_failure is None or not reference_failure.type:
         return False
-    if reference_failure["type"] != "low_ttc":
+    if reference_failure.type != "low_ttc":
         return True
-    return not reference_avoids(dict(source), dict(reference_failure))
+    return not reference_avoids(source, reference_failure)
 
 
 def reference_passed(record: EpisodeRecord) -> bool:
@@ -72,19 +73,18 @@ def reference_passed(record: EpisodeRecord) -> bool:
         return False
     if not record.reference:
         return True
-    return not reference_failed(dict(record.failure or {}), record.reference.get("failure"))
+    return not reference_failed(record.failure, Failure.of(record.reference.get("failure")))
 
 
-def reference_outcome(source: Mapping[str, Any], episodes: List[Mapping[str, Any]], reference: str) -> Dict[str, Any]:
+def reference_outcome(source: Failure, episodes: List[Mapping[str, Any]], reference: str) -> Dict[str, Any]:
     """The avoidability check's record from the reference driver's ``episodes`` (each with its ``failure``):
     ``{"reference", "k", "failed", "avoided_rate", "failures"}``, ``failures`` counting the failing episodes
     by failure class (``"collision:struck_from_behind": 3``; :func:`reference_failed` says which fail)."""
     failures: Dict[str, int] = {}
     for episode in episodes:
-        failure = episode.get("failure")
+        failure = Failure.of(episode.get("failure"))
         if reference_failed(source, failure):
-            label = str(failure.get("kind") or failure["type"])
-            failures[label] = failures.get(label, 0) + 1
+            failures[failure.kind] = failures.get(failure.kind, 0) + 1
     failed = sum(failures.values())
     return {"reference": reference, "k": len(episodes), "failed": failed,
             "avoided_rate": 1.0 - failed / len(episodes) if episodes else 0.0,
@@ -97,11 +97,9 @@ def reproduction_seeds(record_seed: int, k: int, seed: int = 0) -> List[int]:
     return [int(s) & 0x7FFFFFFF for s in state]
 
 
-def detected_failure(result, trace, options: Union[MonitorSettings, Mapping[str, Any], None]
-                     ) -> Optional[Dict[str, Any]]:
-    """The episode's failure as a dict (the miner's monitors, :func:`dv2s_gym.mining.monitors.detect_failure`)."""
-    found = detect_failure(result, trace, MonitorSettings.of(options))
-    return None if found is None else found.to_json()
+def detected_failure(result, trace, options: Union[MonitorSettings, Mapping[str, Any], None]) -> Optional[Failure]:
+    """The episode's failure (the miner's monitors, :func:`dv2s_gym.mining.monitors.detect_failure`)."""
+    return detect_failure(result, trace, MonitorSettings.of(options))
 
 
 def monitor_options(run_dir: Path, monitor: Union[MonitorSettings, Mapping[str, Any], None]) -> MonitorSettings:
@@ -129,7 +127,7 @@ def video_settings(settings: ConversionSettings) -> VideoSettings:
 
 
 def reproduce(script_path: Path, policy: Any, settings: ConversionSettings, record_seed: int,
-              source_failure: Mapping[str, Any],
+              source_failure: Failure,
               interaction: Union[FailureInteraction, Mapping[str, Any], None] = None
               ) -> Tuple[List[Dict[str, Any]], List[Any]]:
     """Run ``policy`` on the new scenario over the settings' ``k`` seeds derived from ``record_seed`` (with the
@@ -158,19 +156,19 @@ def reproduce(script_path: Path, policy: Any, settings: ConversionSettings, reco
 
 def _reproduction_episode(scene_seed: int, result: Any, trace: Any,
                           monitor: Union[MonitorSettings, Mapping[str, Any], None],
-                          source_failure: Mapping[str, Any], interaction: Optional[FailureInteraction]
+                          source_failure: Failure, interaction: Optional[FailureInteraction]
                           ) -> Dict[str, Any]:
-    """One episode of :func:`reproduce`, judged."""
+    """One episode of :func:`reproduce`, judged (its ``failure`` as its JSON object)."""
     failure = detected_failure(result, trace, monitor)
-    actor = key_actor(trace, failure) if failure else None
+    actor = key_actor(trace, failure) if failure is not None else None
     actor_kind = None
     if actor is not None:
-        actor_kind = (failure.get("with_kind") if failure.get("with") == actor and failure.get("with_kind")
+        actor_kind = (failure.with_kind if failure.with_ == actor and failure.with_kind
                       else trace_actor_kind(trace, actor))
     wanted_kind = interaction.kind if interaction is not None else None
     same = same_failure_class(source_failure, failure) and (wanted_kind is None or actor_kind == wanted_kind)
     shown = trace_shows_interaction(interaction, trace) if recorded(interaction) else None
-    return {"seed": scene_seed, "failure": failure, "steps": result.steps, "trajectory_hash": result.trajectory_hash,
+    return {"seed": scene_seed, "failure": failure.to_dict() if failure is not None else None, "steps": result.steps, "trajectory_hash": result.trajectory_hash,
             "actor_kind": actor_kind, "interaction": shown, "reproduced": same}
 
 

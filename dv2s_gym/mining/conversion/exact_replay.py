@@ -24,7 +24,7 @@ from __future__ import annotations
 import os
 import re
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
+from dv2s_gym.mining.monitors import Failure, MonitorSettings, detect_failure
 from dv2s_gym.mining.conversion.scenic_values import read_support, support_contains, support_text
 from dv2s_gym.mining.conversion.scene_draws import inline_draws
 from policies.run_identity import checkpoint_path, dv2s_sources_sha256, installed_version
@@ -204,9 +204,9 @@ class ReplayOutcome(dict):
 
 def run_replay(scenario: Any, *, policy: Any, seed: int, params: Mapping[str, Any],
                env_config: Optional[Mapping[str, Any]] = None, bank_dir: Optional[str] = None,
-               monitor: Union[MonitorSettings, Mapping[str, Any], None] = None) -> Tuple[Any, Any, Optional[Dict[str, Any]]]:
+               monitor: Union[MonitorSettings, Mapping[str, Any], None] = None) -> Tuple[Any, Any, Optional[Failure]]:
     """Run ``policy`` on ``scenario`` (a bank name or a ``.scenic`` path) with ``seed`` and ``params`` fixed;
-    returns ``(EpisodeResult, EpisodeTrace, failure dict or None)`` (the miner's monitors)."""
+    returns ``(EpisodeResult, EpisodeTrace, Failure or None)`` (the miner's monitors)."""
     from envs.dv2s_env import DV2SEnv
 
     env = DV2SEnv(scenario=str(scenario), config=dict(env_config or {}), bank_dir=bank_dir)
@@ -219,8 +219,7 @@ def run_replay(scenario: Any, *, policy: Any, seed: int, params: Mapping[str, An
         result, trace = run_episode(env, bound, name, int(seed), params=dict(params) or None)
     finally:
         env.close()
-    found = detect_failure(result, trace, MonitorSettings.of(monitor))
-    return result, trace, None if found is None else found.to_json()
+    return result, trace, detect_failure(result, trace, MonitorSettings.of(monitor))
 
 
 def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
@@ -247,7 +246,8 @@ def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
                                    f"(trajectory hash {result.trajectory_hash[:12]} != recorded "
                                    f"{str(replay.get('trajectory_hash'))[:12]}): "
                                    + mismatch_reason(replay, replay_versions(policy)))
-    out = ReplayOutcome(trajectory_hash=result.trajectory_hash, matches=matches, failure=failure,
+    out = ReplayOutcome(trajectory_hash=result.trajectory_hash, matches=matches,
+                        failure=failure.to_dict() if failure is not None else None,
                         steps=result.steps, reason=reason)
     out.trace = trace
     return out

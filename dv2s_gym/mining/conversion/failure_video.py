@@ -47,7 +47,7 @@ from envs.safety_metrics import path_is_free
 from envs.trace import EpisodeTrace, TraceMismatchError
 from policies.evaluation import run_episode, make_eval_env
 from policies.registry import load_policy
-from scenario_bank.records import EpisodeRecord, RecordError
+from scenario_bank.records import EpisodeRecord, Failure, RecordError
 
 __all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "VideoSettings", "clip_camera", "failure_step",
            "record_failure_video", "rerun_failure", "stall_end", "write_failure_video", "write_script_episode_video"]
@@ -133,15 +133,14 @@ def _frequency(config: Mapping[str, Any]) -> float:
     return float(config.get("policy_frequency") or 5)
 
 
-def failure_step(failure: Optional[Mapping[str, Any]], steps: int, frequency: float) -> int:
+def failure_step(failure: Optional[Failure], steps: int, frequency: float) -> int:
     """The frame index (0 = the reset) showing the failure: the failure's ``step`` when given, else the
     frame nearest its ``time`` (as the miner's monitors count steps); the last frame when neither is
     known. Clipped to ``[0, steps]``."""
-    failure = failure or {}
-    if failure.get("step") is not None:
-        k = int(failure["step"])
-    elif failure.get("time") is not None:
-        k = int(round(float(failure["time"]) * frequency))
+    if failure is not None and failure.step is not None:
+        k = int(failure.step)
+    elif failure is not None and failure.time is not None:
+        k = int(round(float(failure.time) * frequency))
     else:
         k = steps
     return max(0, min(steps, k))
@@ -162,10 +161,14 @@ def stall_end(trace, start: int, max_frames: int) -> int:
     return last
 
 
-def _trace_failure(trace) -> Optional[Dict[str, Any]]:
-    """The first failure event of a trace (a collision involving the ego, or leaving the road)."""
+def _trace_failure(trace) -> Optional[Failure]:
+    """The first failure event of a trace (a collision involving the ego, with the other actor, or leaving the
+    road)."""
     event = trace.first_failure_event()
-    return None if event is None else {"type": event["kind"], "time": float(event["time"])}
+    if event is None:
+        return None
+    other = trace.other_actor(event) if event["kind"] == "collision" else None
+    return Failure(str(event["kind"]), float(event["time"]), with_=other)
 
 
 def _episode_record(record: Union[EpisodeRecord, Mapping[str, Any]]) -> EpisodeRecord:
@@ -355,12 +358,12 @@ def _stall_span(settings: VideoSettings, frequency: float) -> int:
     return int(math.ceil(MonitorSettings.of(settings.monitor).stall_seconds * frequency))
 
 
-def _camera(trace, failure: Optional[Mapping[str, Any]], k: int, frequency: float, stall: bool,
+def _camera(trace, failure: Optional[Failure], k: int, frequency: float, stall: bool,
             settings: VideoSettings, frames: int) -> Dict[str, Any]:
     """The look-ahead view (:func:`clip_camera`) that holds the actor ``failure`` involves in the clip's frames
     (those up to the failure's frame, or through a ``stall``)."""
     start, end = _window(trace, k, frequency, stall, settings, frames)
-    return clip_camera(trace, key_actor(trace, failure) if failure else None, start, end)
+    return clip_camera(trace, key_actor(trace, failure) if failure is not None else None, start, end)
 
 
 def _write_window(out_path: Path, frames: List[np.ndarray], trace, k: int, frequency: float,
@@ -410,7 +413,7 @@ def _record_clip(record: EpisodeRecord, settings: VideoSettings) -> tuple:
     frequency = _frequency({**VIDEO_CONFIG, **dict(settings.env_config or {})})
     steps = int((record.result or {}).get("steps") or 0)
     k = failure_step(record.failure, steps, frequency)
-    stall = (record.failure or {}).get("type") == "stall"
+    stall = record.failure is not None and record.failure.type == "stall"
     span = _stall_span(settings, frequency) if stall else 0  # an upper bound of the stall's frames
     end = k + span + int(round(settings.after * frequency))
     camera: Dict[str, Any] = {}
@@ -439,17 +442,9 @@ def _trace_clip(source: Any, settings: VideoSettings) -> tuple:
     frequency = _frequency(trace.config)
     failure = _trace_failure(trace)
     k = failure_step(failure, len(trace.actions), frequency)
-    failure = {**(failure or {}), **_trace_failure_actor(trace)}
     camera = _camera(trace, failure, k, frequency, False, settings, len(trace.states))
     frames = _replay_trace_frames(trace, camera)
     return frames, None, trace, frequency, k, False
-
-
-def _trace_failure_actor(trace) -> Dict[str, Any]:
-    """``{"with": actor}`` of the trace's first ego collision (the other actor), ``{}`` without one."""
-    event = trace.first_failure_event()
-    other = trace.other_actor(event) if event is not None and event["kind"] == "collision" else None
-    return {"with": other} if other is not None else {}
 
 
 def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any], out_path: PathLike,
@@ -477,9 +472,9 @@ def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any]
     config = {**dict(settings.env_config or {}), **VIDEO_CONFIG}
     frequency = _frequency(config)
     seed, episode_steps = int(episode["seed"]), int(episode["steps"])
-    failure, trajectory_hash = episode.get("failure") or None, episode.get("trajectory_hash")
-    stall = (failure or {}).get("type") == "stall"
-    k = (failure_step(failure, episode_steps, frequency) if failure
+    failure, trajectory_hash = Failure.of(episode.get("failure")), episode.get("trajectory_hash")
+    stall = failure is not None and failure.type == "stall"
+    k = (failure_step(failure, episode_steps, frequency) if failure is not None
          else max(0, min(episode_steps, episode_steps if centre is None else int(centre))))
     span = _stall_span(settings, frequency) if stall else 0  # an upper bound of the stall's frames
     end = k + span + int(round(settings.after * frequency))

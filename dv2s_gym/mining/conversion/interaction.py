@@ -30,7 +30,7 @@ from typing import Any, ClassVar, Dict, FrozenSet, List, Mapping, Optional, Tupl
 from dv2s_gym.pipeline.semantics.trace import ego_frame, elements_from_trace, trace_actor_kind
 from scenario_bank.failure_types import failure_type
 from scenario_bank.elements import ActorKind
-from scenario_bank.records import JsonRecord
+from scenario_bank.records import Failure, JsonRecord
 
 __all__ = ["MANOEUVRES", "LOOKBACK_S", "FailureInteraction", "key_actor", "actor_manoeuvres", "failure_interaction",
            "shows_interaction", "trace_shows_interaction", "interaction_sentence"]
@@ -48,29 +48,35 @@ def _frequency(trace) -> float:
     return float((trace.config or {}).get("policy_frequency") or 5)
 
 
-def _failure_step(trace, failure: Mapping[str, Any]) -> int:
+def _failure_step(trace, step: Optional[int], time: Optional[float]) -> int:
+    """The trace's step of a failure at ``step`` (else at ``time`` [s]; neither: the last step)."""
     last = max(0, len(trace.states) - 1)
-    if failure.get("step") is not None:
-        return max(0, min(last, int(failure["step"])))
-    if failure.get("time") is not None:
-        return max(0, min(last, int(round(float(failure["time"]) * _frequency(trace)))))
+    if step is not None:
+        return max(0, min(last, int(step)))
+    if time is not None:
+        return max(0, min(last, int(round(float(time) * _frequency(trace)))))
     return last
 
 
-def key_actor(trace, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
+def _step_of(trace, failure: Optional[Failure]) -> int:
+    """The trace's step of ``failure`` (without one: the last step)."""
+    return _failure_step(trace, failure.step, failure.time) if failure is not None else _failure_step(trace, None, None)
+
+
+def key_actor(trace, failure: Optional[Failure]) -> Optional[str]:
     """The name of the actor the failure involved (see the module doc), or None when the ego was alone."""
-    failure = dict(failure or {})
     if not trace.states:
         return None
     names = [n for n in trace.states[0] if n != "ego"]
-    partner = failure.get("with")
-    if failure.get("type") == "collision" and partner is None:
+    kind = failure.type if failure is not None else None
+    partner = failure.with_ if failure is not None else None
+    if kind == "collision" and partner is None:
         event = trace.ego_collision()
         partner = trace.other_actor(event) if event is not None else None
-    row = failure_type(str(failure.get("type")))
+    row = failure_type(str(kind))
     if partner is not None and partner in names and row is not None and row.with_actor:
         return partner
-    k = _failure_step(trace, failure)
+    k = _step_of(trace, failure)
     ahead: Dict[str, float] = {}
     near: Dict[str, float] = {}
     for step in _lookback(trace, k):
@@ -125,7 +131,7 @@ class FailureInteraction(JsonRecord):
         return frozenset({"failure_type", "actor", "kind", "gap_m", "side"})
 
 
-def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> FailureInteraction:
+def failure_interaction(trace, failure: Optional[Failure]) -> FailureInteraction:
     """The failure's interaction (:class:`FailureInteraction`: failure type, key actor, kind, manoeuvres, gap,
     side).
 
@@ -135,17 +141,16 @@ def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> FailureI
     first seen in the :data:`LOOKBACK_S` seconds up to the failure, ``side`` where it was then
     (``"same_lane"``, ``"left"``, ``"right"``).
     """
-    failure = dict(failure or {})
     name = key_actor(trace, failure)
-    out = FailureInteraction(failure_type=failure.get("type"), actor=name)
+    out = FailureInteraction(failure_type=failure.type if failure is not None else None, actor=name)
     if name is None:
         return out
     known = dict(getattr(trace, "kinds", {}) or {})
     kind = known[name] if name in known else (
-        failure.get("with_kind") if failure.get("with") == name and failure.get("with_kind")
+        failure.with_kind if failure is not None and failure.with_ == name and failure.with_kind
         else trace_actor_kind(trace, name))
     out = out.replace(kind=kind, manoeuvres=tuple(actor_manoeuvres(trace, name)))
-    seen = _first_seen(trace, name, _failure_step(trace, failure))
+    seen = _first_seen(trace, name, _step_of(trace, failure))
     return out if seen is None else out.replace(gap_m=round(seen[0], 1), side=seen[1])
 
 
@@ -219,7 +224,7 @@ def _side_at_failure(trace, name: str) -> Optional[str]:
     """Where actor ``name`` was beside the ego (:func:`_first_seen`) up to the ego's first failure event, or the
     episode's end: as :func:`failure_interaction` reads a failure's ``side``."""
     event = trace.first_failure_event()
-    seen = _first_seen(trace, name, _failure_step(trace, {"time": float(event.get("time", 0.0))} if event else {}))
+    seen = _first_seen(trace, name, _failure_step(trace, None, float(event.get("time", 0.0)) if event else None))
     return None if seen is None else seen[1]
 
 

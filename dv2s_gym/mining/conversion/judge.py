@@ -13,6 +13,7 @@ from dv2s_gym.mining.conversion.ranges import exact_number
 from dv2s_gym.mining.conversion.rejection import ConversionRejected
 from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.conversion.scenic_values import support_text
+from scenario_bank.records import Failure
 
 __all__ = ["judge_conversion", "COMPARED_SHARE"]
 
@@ -43,7 +44,7 @@ conversion, each with what is wrong, in the order the rejection reasons list the
 
 
 def judge_conversion(out: Mapping[str, Any], interaction: Union[FailureInteraction, Mapping[str, Any]],
-                     source_failure: Mapping[str, Any], threshold: float) -> List[ConversionRejected]:
+                     source_failure: Failure, threshold: float) -> List[ConversionRejected]:
     """The checks a converted script must pass, each failing one a rejection with its own stage:
     ``interaction`` (its runs show the failure's actor doing its manoeuvre), ``reproduction`` (the policy
     fails the same way with the same kind of actor), ``avoidability`` (the reference driver drives most
@@ -64,7 +65,7 @@ def judge_conversion(out: Mapping[str, Any], interaction: Union[FailureInteracti
                                                        f"{threshold:g})"))
     if repro["rate"] < threshold:
         with_kind = f" with a {interaction.kind}" if interaction.kind else ""
-        found.append(ConversionRejected("reproduction", f"the new scenario reproduced the {source_failure['type']} "
+        found.append(ConversionRejected("reproduction", f"the new scenario reproduced the {source_failure.type} "
                                                         f"failure{with_kind} in {repro['reproduced']} of {k} episodes "
                                                         f"(rate {repro['rate']:.2f} < threshold {threshold:g})"))
     avoid = out.get("avoidability")

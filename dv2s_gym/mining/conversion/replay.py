@@ -25,7 +25,7 @@ from dv2s_gym.pipeline.metrics import e2e_sc
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from scenario_bank.bank import Bank, DuplicateScenarioError
 from scenario_bank.errors import NearDuplicateWarning
-from scenario_bank.records import EpisodeRecord, Provenance, Sidecar
+from scenario_bank.records import EpisodeRecord, Failure, Provenance, Sidecar
 
 __all__ = ["replay_failure_entry", "add_replay", "replay_without_video", "ReplaySource", "link_entries"]
 
@@ -39,10 +39,10 @@ def link_entries(bank, name: str, fields: Mapping[str, Any]) -> None:
 
 @dataclasses.dataclass
 class ReplaySource:
-    """The failure an exact replay keeps: its failure dict, cluster, the mining run folder, and what the conversion
+    """The failure an exact replay keeps: its failure, cluster, the mining run folder, and what the conversion
     read from it so far (its trace, interaction and files: ``None`` when no video was made)."""
 
-    source_failure: Mapping[str, Any]
+    source_failure: Failure
     cluster: Optional[str]
     run_dir: Path
     source_trace: Any = None
@@ -64,7 +64,8 @@ def add_replay(record: EpisodeRecord, bank, settings: ConversionSettings, source
     (:func:`~dv2s_gym.mining.conversion.episodes.reference_passed`) is not replayed: ``{"entry": None, "note",
     "not_narrowed": {}}``."""
     if not reference_passed(record):
-        failed = ((record.reference or {}).get("failure") or {}).get("type") or "not avoided"
+        reference_failure = Failure.of((record.reference or {}).get("failure"))
+        failed = reference_failure.type if reference_failure is not None else "not avoided"
         return {"entry": None, "not_narrowed": {}, "note": f"no replay entry: the reference driver failed this scene "
                                                           f"too ({failed}), so it is no failure the policy could have "
                                                           "avoided"}
@@ -74,7 +75,7 @@ def add_replay(record: EpisodeRecord, bank, settings: ConversionSettings, source
     replay = {"params": params, "intervals": intervals, "not_narrowed": not_narrowed, "seed": int(record.seed),
               "trajectory_hash": record.result["trajectory_hash"],
               "policy": policy_name(settings.policy), **replay_versions(settings.policy)}
-    out = {"entry": None, **replay, "failure": failure, "note": None,
+    out = {"entry": None, **replay, "failure": failure.to_dict() if failure is not None else None, "note": None,
            "e2e_sc": e2e_sc(elements_from_trace(source.source_trace), elements_from_trace(trace))}
     _bank_replay(out, record, bank, parent, script, replay, settings, source)
     return out
@@ -100,8 +101,8 @@ def _run_narrowed(record: EpisodeRecord, parent: Any, params: Dict[str, Any], se
     if source.source_trace is None:  # the same episode step for step: its trace is the failure's own
         trace.save(folder / ENTRY_TRACE)
         source_failure = source.source_failure
-        if failure and failure.get("type") == source_failure.get("type"):
-            source_failure = {**failure, **{k: v for k, v in source_failure.items() if v is not None}}
+        if failure is not None and failure.type == source_failure.type:
+            source_failure = source_failure.completed_by(failure)
         interaction = source.interaction
         if interaction is None:
             interaction = failure_interaction(trace, source_failure)
@@ -125,18 +126,18 @@ def _bank_replay(out: Dict[str, Any], record: EpisodeRecord, bank, parent: Any, 
     provenance = Provenance(kind="mined", parent=record.scenario, seed=seed, params=params,
                             video=ENTRY_VIDEO if ENTRY_VIDEO in files else None,
                             trace=ENTRY_TRACE if ENTRY_TRACE in files else None, generator="exact replay",
-                            policy=policy_name(policy), failure=dict(source_failure), cluster=source.cluster,
+                            policy=policy_name(policy), failure=source_failure.to_dict(), cluster=source.cluster,
                             run=str(source.run_dir.resolve()), index=record.index,
                             interaction=FailureInteraction.from_dict(source.interaction).to_dict(),
                             replay=dict(replay), e2e_sc=out["e2e_sc"],
                             date=datetime.date.today().isoformat())
-    base = replay_name(record.scenario, source_failure["type"])
+    base = replay_name(record.scenario, source_failure.type)
     name, n = base, 2
     while name in bank:
         name, n = f"{base}_{n}", n + 1
     try:
         fields = Sidecar(description=description, name=name, elements=parent.elements, map=parent.map,
-                         tags=("mined", REPLAY_TAG, source_failure["type"]), source=provenance)
+                         tags=("mined", REPLAY_TAG, source_failure.type), source=provenance)
         with warnings.catch_warnings():  # a replay is by construction a near-duplicate of its parent
             warnings.simplefilter("ignore", NearDuplicateWarning)
             entry = bank.add(script, fields, files=files)
@@ -178,9 +179,9 @@ def replay_failure_entry(record: EpisodeRecord, run_dir: PathLike, settings: Con
     out: Dict[str, Any] = {"cluster": cluster, "index": record.index, "scenario": record.scenario,
                            "status": "rejected", "replay_entry": None, "reason": None, "note": None, "seconds": None}
     try:
-        failure = dict(record.failure or {})
-        if not failure.get("type"):
-            raise ConversionRejected("input", "the record holds no failure (record['failure'] is empty)")
+        failure = record.failure
+        if failure is None or not failure.type:
+            raise ConversionRejected("input", "the record holds no failure (its 'failure' is empty)")
         if not (record.result or {}).get("trajectory_hash"):
             raise ConversionRejected("input", "the record holds no trajectory hash to check the replay against")
         if isinstance(bank, (str, os.PathLike)):
