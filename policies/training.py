@@ -75,6 +75,7 @@ from scenario_bank.bank import Bank
 from scenario_bank.run_identity import (BANK_IDENTITY, RunIdentityError, bank_identity, check_bank_unchanged,
                                        check_format, check_identity, check_run_kind, record_format)
 from policies.run_identity import CODE_IDENTITY, check_code_unchanged, code_identity
+from scenario_bank.run_paths import as_read, read_paths, record_paths, resume_fix
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 import stable_baselines3 as sb3
@@ -359,6 +360,12 @@ def _new_run_record(config: TrainConfig, names: Sequence[str]) -> Dict[str, Any]
     no segment yet."""
     return {**record_format(_RUN_SCHEMA, _RUN_VERSION), "config": config.to_json(),
             BANK_IDENTITY: bank_identity(Bank(config.bank_dir), names), CODE_IDENTITY: code_identity(), "segments": []}
+
+
+def _write_record(path: Path, record: Mapping[str, Any]) -> None:
+    """Write ``run.json`` with the paths inside the run folder, or inside the loop folder holding it, relative to
+    that folder (:mod:`scenario_bank.run_paths`: a moved run folder resumes where it is)."""
+    atomic_write_json(path, record_paths(dict(record), path.parent))
 
 
 _FINE_TUNING_ONLY = ("learning_rate", "reward_weights")
@@ -764,6 +771,7 @@ def load_run_config(out: os.PathLike | str) -> Tuple[TrainConfig, Dict[str, Any]
         raise TrainingError(f"{path} is not a readable run record ({error}); start a new run in another --out") from error
     check_format(record, _RUN_SCHEMA, _RUN_VERSION, folder=out, what="a training run", file=path.name,
                  error=TrainingError)
+    record = read_paths(record, out)  # paths in the run (or its loop) folder where they are now
     try:
         return TrainConfig.from_json(record["config"]), record
     except (KeyError, TypeError) as error:
@@ -793,8 +801,9 @@ def _check_resume(config: TrainConfig, record: Mapping[str, Any], names: Sequenc
     (``config``, :meth:`TrainConfig.to_json`'s form: a fine-tuning setting it leaves out is ``None`` on both sides),
     the scripts of its scenarios ``names`` and the code."""
     run = f"{config.out} holds a training run"
-    check_identity(record["config"], config.to_json(), TrainConfig.IDENTITY, run=run,
-                   fix="resume with the run's own settings (omit the option) or start a new run in another --out")
+    check_identity(record["config"], as_read(config.to_json(), config.out), TrainConfig.IDENTITY, run=run,
+                   fix=resume_fix(config.out, "resume with the run's own settings (omit the option) or start a new "
+                                              "run in another --out"))
     check_bank_unchanged(record.get(BANK_IDENTITY), bank_identity(Bank(config.bank_dir), names), run=run)
     check_code_unchanged(record, run=run, error=RunIdentityError)
 
@@ -902,7 +911,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         planned, plan = planned_steps(model, start, config.steps)
         if plan:
             log(plan)
-        atomic_write_json(run_path, record)
+        _write_record(run_path, record)
         callbacks, saver = _callbacks(config, names, env_config, sampler, planned)
         began = time.perf_counter()
         remaining = config.steps - start
@@ -912,7 +921,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
                        "wall_time_s": round(time.perf_counter() - began, 3),
                        "resumed_from": checkpoint.name if resume else None}
             record["segments"].append(segment)
-            atomic_write_json(run_path, record)
+            _write_record(run_path, record)
             return segment
 
         if remaining > 0:
@@ -1225,4 +1234,4 @@ def _first_checkpoint(config: TrainConfig, source: Path, start_step: int, learni
             model.learning_rate = float(learning_rate)
             model._setup_lr_schedule()
             model.save(tmp)
-    atomic_write_json(out / "run.json", _new_run_record(config, _resolve_names(config)))
+    _write_record(out / "run.json", _new_run_record(config, _resolve_names(config)))
