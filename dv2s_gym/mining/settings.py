@@ -256,4 +256,5 @@ def read_run_settings(run_dir: Union[str, os.PathLike], *,
         raise error(f"{path} is not readable JSON ({problem}); {fix}") from None
     if not isinstance(values, dict):
         raise error(f"{path} is not a mining run's settings (a JSON {type(values).__name__}, not an object); {fix}")
-    return RunSettings(path, read_paths(values, path.parent))  # paths in the run or its loop folder, where they are now
+    # the paths in the run folder, or in the loop folder that holds it, where they are now
+    return RunSettings(path, read_paths(values, path.parent))
