@@ -50,6 +50,11 @@ _KILLS = {
 }
 
 
+_RECORDS = ("loop.json", "settings.json", "run.json", "progress.json", "meta.json", "heldout.jsonl",
+            "episodes.jsonl", "conversions.jsonl", "replays.jsonl", "results.jsonl")
+"""The files of a loop folder that a resume reads: the runs' records, the bank entries' sidecars, the logs."""
+
+
 def _comparable(report: dict, folder: Path) -> dict:
     """``report.json`` without the loop folder's path and the wall times (which differ from run to run)."""
     def strip(value):
@@ -77,12 +82,16 @@ def test_a_loop_killed_in_three_inner_runs_and_moved_after_each_finishes_as_a_ru
         assert getattr(owner, name).__name__ != "killing", f"the loop did not reach the kill in {stage}"
     report = run_loop("dv2s-ppo", out=folder, **SETTINGS)
     got = _comparable(json.loads(report.paths["json"].read_text()), folder)
+    # the control's DAgger went on from its checkpoint in the moved folder (the report says so), not from the start
+    assert got["rounds"][0]["steps"]["control"].pop("resumed") == [
+        {"from_iteration": 1, "steps_into_next": 0, "envs_reproduced": True}]
+    assert expected["rounds"][0]["steps"]["control"].pop("resumed") == []
     for step, value in expected["rounds"][0]["steps"].items():  # step by step: a difference names its step
         assert got["rounds"][0]["steps"][step] == value, step
     assert got == expected
-    # nothing the loop folder holds names a place it was before
+    # no record a resume reads names a place the folder was before (a report names where it was written)
     for path in folder.rglob("*"):
-        if path.is_file() and path.suffix in (".json", ".jsonl"):
+        if path.is_file() and path.name in _RECORDS:
             text = path.read_text(encoding="utf-8")
             for before in ("first", "moved_1", "moved_2"):
                 assert str(tmp_path / before) not in text, path
