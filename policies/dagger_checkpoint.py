@@ -40,6 +40,7 @@ from policies.training import TrainingError
 from scenario_bank.run_identity import bank_identity, check_format, check_identity, record_format
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json, file_sha256
 from scenario_bank.bank import Bank
+from scenario_bank.run_paths import as_read, read_paths, record_paths, resume_fix
 
 if TYPE_CHECKING:
     from policies.training import TrainConfig
@@ -202,11 +203,14 @@ class DAggerCheckpoint:
         data = self._progress()
         if data is None:
             return None
-        recorded = data.get("identity") or {}
-        keys = [key for key in IDENTITY_ORDER if key in recorded or key in self.identity]
-        check_identity(recorded, self.identity, keys + sorted((set(recorded) | set(self.identity)) - set(keys)),
+        # paths in the fine-tuning's folder or the loop folder holding it, where they are now (a moved folder resumes)
+        recorded = read_paths(data.get("identity") or {}, self.folder.parent)
+        asked = as_read(self.identity, self.folder.parent)
+        keys = [key for key in IDENTITY_ORDER if key in recorded or key in asked]
+        check_identity(recorded, asked, keys + sorted((set(recorded) | set(asked)) - set(keys)),
                        run=f"{self.folder} holds an unfinished DAgger run", notes=_DERIVED,
-                       fix=f"pass the same settings to resume it, or delete {self.folder} to start over")
+                       fix=resume_fix(self.folder.parent, f"pass the same settings to resume it, or delete "
+                                                          f"{self.folder} to start over"))
         iteration = int(data["iteration"])
         try:
             observations, labels, disagreed, next_observations = [], [], [], None
@@ -254,8 +258,8 @@ class DAggerCheckpoint:
         torch.save({"policy": model.policy.state_dict(), "optimizer": optimizer.state_dict(),
                     "torch_rng": torch.get_rng_state()}, buffer)
         atomic_write_bytes(self.folder / f"weights_{iteration}.pt", buffer.getvalue())
-        self._committed = {**record_format(SCHEMA, VERSION), "identity": self.identity,
-                           "iteration": int(iteration), "history": history, "rng": rng.bit_generator.state, "envs": envs,
+        identity = record_paths(self.identity, self.folder.parent)
+        self._committed = {**record_format(SCHEMA, VERSION), "identity": identity, "iteration": int(iteration), "history": history, "rng": rng.bit_generator.state, "envs": envs,
                            "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes}
         atomic_write_json(self.progress_path, {**self._committed, "partial": None})
         (self.folder / f"weights_{iteration - 1}.pt").unlink(missing_ok=True)
@@ -269,7 +273,7 @@ class DAggerCheckpoint:
         name = f"partial_{partial.iteration}_{partial.rows}.npz"
         atomic_write_bytes(self.folder / name, _npz_bytes(partial))
         committed = self._committed or {
-            **record_format(SCHEMA, VERSION), "identity": self.identity, "iteration": 0, "history": [],
+            **record_format(SCHEMA, VERSION), "identity": record_paths(self.identity, self.folder.parent), "iteration": 0, "history": [],
             "rng": rng.bit_generator.state, "envs": []}
         atomic_write_json(self.progress_path, {
             **committed, "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes,

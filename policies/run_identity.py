@@ -49,6 +49,7 @@ from scenario_bank.atomic import file_sha256
 from scenario_bank.failure_types import plugin_table
 from scenario_bank.named_registry import replaced_built_ins
 from scenario_bank.plugins import MAIN, code_modules
+from scenario_bank.run_paths import resume_fix
 
 __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "check_policy_unchanged",
            "checkpoint_path", "installed_version", "MAX_HELPER_FILES", "CODE_IDENTITY", "dv2s_sources_sha256",
@@ -231,12 +232,14 @@ def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: An
     changes = fingerprint_changes(old, _as_recorded(old, now))
     if changes and role != "policy":
         raise error(f"{folder} holds a {run} whose {role} {spec} has changed since ({'; '.join(changes[:3])}"
-                    f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the {role} "
-                    "(its checkpoint or module as the run used it), or pass a new --out")
+                    f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); " + resume_fix(
+                        folder, f"restore the {role} (its checkpoint or module as the run used it), or pass a new "
+                                "--out"))
     if changes:
         raise error(f"{folder} holds a {run} of {spec} whose policy has changed since ({'; '.join(changes[:3])}"
-                    f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the policy "
-                    "(its checkpoint or module as the run used it), or pass a new --out")
+                    f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); " + resume_fix(
+                        folder, "restore the policy (its checkpoint or module as the run used it), or pass a new "
+                                "--out"))
     return now
 
 

@@ -32,6 +32,7 @@ from dv2s_gym.loop.record import PairedSummary, PairedTable
 from dv2s_gym.mining.monitors import DEFAULT_MONITOR
 from dv2s_gym.mining.tasks import HELDOUT, heldout_task
 from scenario_bank.records import HeldOutEpisode
+from scenario_bank.run_paths import read_paths, record_paths
 from dv2s_gym.regress.stats import mcnemar_exact, PairedTable as Outcomes
 from policies.stats import Rate
 from dv2s_gym.workers.pool import LocalBackend
@@ -53,7 +54,8 @@ class HeldOutStore:
         # a line cut by a kill is left out: its episode runs again. An episode that errored is finished too (its
         # error is its outcome): running only the errored episodes again would give one policy a second draw on
         # exactly those episodes, and the report, which counts them in no rate or test, would not say so
-        for row in read_rows(self.path):
+        # paths in the loop folder where it is now (a moved loop resumes)
+        for row in read_paths(list(read_rows(self.path)), self.path.parent):
             record = HeldOutEpisode.from_dict(row)
             self.records[(record.role, record.scenario, record.seed)] = record
 
@@ -61,7 +63,8 @@ class HeldOutStore:
         """Save one finished episode (fsynced)."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
         with open(self.path, "a", encoding="utf-8") as handle:
-            handle.write(json.dumps(record.to_dict(), sort_keys=True, default=str) + "\n")
+            row = record_paths(json.loads(json.dumps(record.to_dict(), default=str)), self.path.parent)
+            handle.write(json.dumps(row, sort_keys=True) + "\n")
             handle.flush()
             os.fsync(handle.fileno())
         self.records[(record.role, record.scenario, record.seed)] = record

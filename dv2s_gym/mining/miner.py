@@ -53,7 +53,7 @@ from dv2s_gym.mining.sampling import space as space_module
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.conversion.episodes import reference_passed
-from dv2s_gym.mining.conversion.files import cluster_slug, CONVERSION_DIR
+from dv2s_gym.mining.conversion.files import cluster_slug, CONVERSION_DIR, provenance_run_path
 from dv2s_gym.mining.conversion.rejection import SETUP_ERRORS
 from dv2s_gym.mining.conversion.convert import convert_failure
 from dv2s_gym.mining.conversion.record import ConversionRecord, ConversionStatus, read_conversions
@@ -81,6 +81,7 @@ from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, JsonRecord, RecordError
 from scenario_bank.failure_types import failure_table
 from scenario_bank.jail import JailUnavailableError, require_jail
+from scenario_bank.run_paths import as_read, record_paths, resume_fix
 from scenario_bank.run_identity import (BANK_IDENTITY, bank_identity, check_bank_unchanged, check_format,
                                        check_identity, check_run_kind, record_format)
 from policies.registry import load_policy
@@ -335,7 +336,7 @@ def _read_settings(out: Path) -> Optional[RunSettings]:
 def _check_resume(saved: Mapping[str, Any], settings: Dict[str, Any], out: Path,
                   keys: Sequence[str] = _RESUME_KEYS) -> None:
     check_identity(saved, settings, keys, run=f"{out} holds a mining run",
-                   fix="resume it with the same settings or pass another --out")
+                   fix=resume_fix(out, "resume it with the same settings or pass another --out"))
 
 
 def _restore_sampler(mining: _Mining, records: Dict[int, EpisodeRecord]) -> SceneSampler:
@@ -653,13 +654,13 @@ def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[R
     if saved is not None and saved.scenarios:
         _check_still_in_bank(out, saved.scenarios, settings.bank_dir)
     if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
-        before_space = _recorded(policy, settings, saved.scenarios, {})
+        before_space = as_read(_recorded(policy, settings, saved.scenarios, {}), out)
         _check_resume(saved.values, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
         # the same spec naming a changed checkpoint or module is refused, naming what changed
-        check_policy_unchanged(saved.values, policy, folder=out, run="mining run", error=MiningError)
+        check_policy_unchanged(saved.values, as_read(policy, out), folder=out, run="mining run", error=MiningError)
         if settings.reference:
-            check_policy_unchanged(saved.values, settings.reference, folder=out, run="mining run", error=MiningError,
-                                   key=REFERENCE_FINGERPRINT, role="reference driver")
+            check_policy_unchanged(saved.values, as_read(settings.reference, out), folder=out, run="mining run",
+                                   error=MiningError, key=REFERENCE_FINGERPRINT, role="reference driver")
         check_code_unchanged(saved.values, run=f"{out} holds a mining run", error=MiningError)
     same_selection = saved is not None and (settings.scenarios is None
                                             or _selection(settings) == saved.values.get(SELECTION))
@@ -670,14 +671,14 @@ def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[R
     if saved is not None and settings.scenarios is None:
         recorded[SELECTION] = saved.values.get(SELECTION)  # resumed without naming its scenarios: still the same run
     if saved is not None:
-        _check_resume(saved.values, recorded, out)
+        _check_resume(saved.values, as_read(recorded, out), out)
         check_bank_unchanged(saved.values.get(BANK_IDENTITY), recorded[BANK_IDENTITY],
                              run=f"{out} holds a mining run", error=MiningError)
     schedule = _schedule(saved, settings.sampler, out)
     recorded["schedule"] = schedule
     if origin is not None:
         recorded["origin"] = origin.to_json()
-    atomic_write_json(out / SETTINGS_FILE, recorded)
+    atomic_write_json(out / SETTINGS_FILE, record_paths(recorded, out))
     return _Mining(out=out, policy=policy, settings=settings.replace(scenarios=tuple(space.scenarios)),
                    schedule=schedule, space=space)
 
@@ -846,7 +847,7 @@ def _reached_bank(bank, out: Path, cluster: str) -> Optional[ConversionRecord]:
     """The conversion row of ``cluster`` when this run already added it to the bank (or merged it into an entry)
     but was killed before writing its ``conversions.jsonl`` line; rebuilt from the entry's provenance, so a
     resumed run neither converts the cluster again nor reports it merged into the entry it made itself."""
-    run = str(Path(out).resolve())
+    run = Path(out).resolve()
     for entry in bank:
         source = entry.source
         if source.is_replay:
@@ -854,7 +855,7 @@ def _reached_bank(bank, out: Path, cluster: str) -> Optional[ConversionRecord]:
         found = [(ConversionStatus.KEPT, source.to_dict())] + [(ConversionStatus.MERGED, merged)
                                                                for merged in source.merged or ()]
         for status, provenance in found:
-            if provenance.get("run") != run or provenance.get("cluster") != cluster:
+            if provenance_run_path(provenance.get("run"), bank) != run or provenance.get("cluster") != cluster:
                 continue
 
             folder = Path(out) / "failures" / cluster_slug(cluster, provenance.get("index"))

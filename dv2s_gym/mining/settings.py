@@ -16,6 +16,7 @@ from dv2s_gym.mining.sampling.samplers import default_feedback, registered_sampl
 from scenario_bank.field_checks import (check_bool, check_int, check_mapping, check_names,
                                         check_number, check_path, check_text)
 from scenario_bank.run_identity import recorded_settings, resume_keys, setting
+from scenario_bank.run_paths import read_paths
 
 __all__ = ["DEFAULT_BATCH", "FEEDBACKS", "MineSettings", "RunOrigin", "SETTINGS_FILE", "RunSettings",
            "read_run_settings"]
@@ -255,4 +256,5 @@ def read_run_settings(run_dir: Union[str, os.PathLike], *,
         raise error(f"{path} is not readable JSON ({problem}); {fix}") from None
     if not isinstance(values, dict):
         raise error(f"{path} is not a mining run's settings (a JSON {type(values).__name__}, not an object); {fix}")
-    return RunSettings(path, values)
+    # the paths in the run folder, or in the loop folder that holds it, where they are now
+    return RunSettings(path, read_paths(values, path.parent))

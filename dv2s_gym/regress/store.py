@@ -29,6 +29,7 @@ from dv2s_gym.regress.errors import RegressError, ResumeMismatchError
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.records import RecordError, RegressEpisode
 from policies.run_identity import CODE_IDENTITY, RESUME_FINGERPRINT, check_code_unchanged, check_policy_unchanged
+from scenario_bank.run_paths import as_read, read_paths, record_paths, resume_fix
 from scenario_bank.run_identity import (BANK_IDENTITY, check_bank_unchanged, check_format, check_identity,
                                         check_run_kind, record_format)
 
@@ -102,44 +103,47 @@ class RunStore:
                 raise RegressError(f"{run_file} was not written by dv2s regress; choose another --out")
             check_format(stored, _RUN_SCHEMA, _RUN_VERSION, folder=self.root, what="a regression run",
                          file=RUN_FILE, error=ResumeMismatchError)
-            self._check_same_run(there)
+            # paths in the run folder or the loop folder holding it, where they are now (a moved folder resumes)
+            self._check_same_run(read_paths(there, self.root), as_read(self.settings, self.root))
         elif self.results_path.exists():
             raise RegressError(f"{self.results_path} exists without {RUN_FILE}; choose another --out or delete it")
         else:
-            atomic_write_json(run_file, {**record_format(_RUN_SCHEMA, _RUN_VERSION), "settings": self.settings})
+            atomic_write_json(run_file, {**record_format(_RUN_SCHEMA, _RUN_VERSION),
+                                         "settings": record_paths(self.settings, self.root)})
         return self._read()
 
-    def _check_same_run(self, there: Dict[str, Any]) -> None:
-        """Refuse a folder whose ``run.json`` holds other settings, naming each difference and the fix; then
-        other policies, scenario scripts or code than the run's, as every resumable run kind does (each check for
-        a key of :data:`_CHECKED_APART` this run's identity holds)."""
-        if there == self.settings:
+    def _check_same_run(self, there: Dict[str, Any], asked: Dict[str, Any]) -> None:
+        """Refuse a folder whose ``run.json`` holds other settings than ``asked``, naming each difference and the
+        fix; then other policies, scenario scripts or code than the run's, as every resumable run kind does (each
+        check for a key of :data:`_CHECKED_APART` this run's identity holds)."""
+        if there == asked:
             return
         stale = [n for n in ("junit.xml", "report.html", "report.md", "report.json") if (self.root / n).is_file()]
         warning = (f"its reports ({', '.join(stale)}) are that run's, not this one's: nothing was written, so do "
                    "not read them as this run's verdict" if stale else "")
-        check_identity(there, self.settings, sorted((set(there) | set(self.settings)) - set(_CHECKED_APART)),
+        check_identity(there, asked, sorted((set(there) | set(asked)) - set(_CHECKED_APART)),
                        run=f"{self.root} holds a regression run", error=ResumeMismatchError,
-                       fix=f"{warning + '; ' if warning else ''}rerun with the same settings to resume it, or choose "
-                           f"another --out (or delete {self.root}) for a new run")
+                       fix=f"{warning + '; ' if warning else ''}" + resume_fix(
+                           self.root, f"rerun with the same settings to resume it, or choose another --out (or delete "
+                                      f"{self.root}) for a new run"))
         try:
-            self._check_what_the_run_ran(there)
+            self._check_what_the_run_ran(there, asked)
         except ResumeMismatchError as error:
             if not warning:
                 raise
             raise ResumeMismatchError(f"{error} ({warning})", error.differences) from None
 
-    def _check_what_the_run_ran(self, there: Dict[str, Any]) -> None:
+    def _check_what_the_run_ran(self, there: Dict[str, Any], asked: Dict[str, Any]) -> None:
         """The policies, scenario scripts and code of the run in the folder, checked (:data:`_CHECKED_APART`)."""
         for key, role in ((RESUME_FINGERPRINT, "policy"), (BASELINE_FINGERPRINT, "baseline")):
-            spec = self.settings.get("candidate" if role == "policy" else "baseline")
-            if key in self.settings and spec is not None:
+            spec = asked.get("candidate" if role == "policy" else "baseline")
+            if key in asked and spec is not None:
                 check_policy_unchanged(there, spec, folder=self.root, run="regression run",
                                        error=ResumeMismatchError, key=key, role=role)
-        if CODE_IDENTITY in self.settings:
+        if CODE_IDENTITY in asked:
             check_code_unchanged(there, run=f"{self.root} holds a regression run", error=ResumeMismatchError)
-        if BANK_IDENTITY in self.settings:
-            check_bank_unchanged(there.get(BANK_IDENTITY), self.settings[BANK_IDENTITY],
+        if BANK_IDENTITY in asked:
+            check_bank_unchanged(there.get(BANK_IDENTITY), asked[BANK_IDENTITY],
                                  run=f"{self.root} holds a regression run", error=ResumeMismatchError)
 
     def _read(self) -> Dict[Key, RegressEpisode]:

@@ -18,8 +18,9 @@ from policies.registry import (PolicySpaceError, SB3Policy, SHIPPED_CHECKPOINT, 
                                parse_spec, read_model_card)
 from policies.training.config import ALGORITHMS, TrainConfig, TrainingError, known_hyperparameters
 from policies.training.learning import train
-from policies.training.run_record import latest_checkpoint, new_run_record, resolve_scenario_names
-from scenario_bank.atomic import atomic_path, atomic_write_json
+from policies.training.run_record import (latest_checkpoint, new_run_record, resolve_scenario_names,
+                                          write_run_record)
+from scenario_bank.atomic import atomic_path
 
 __all__ = ["resolve_checkpoint", "check_source_observation", "with_reward_weights", "fine_tune_scenarios", "fine_tune"]
 
@@ -181,4 +182,4 @@ def _first_checkpoint(config: TrainConfig, source: Path, start_step: int, learni
             model.learning_rate = float(learning_rate)
             model._setup_lr_schedule()
             model.save(tmp)
-    atomic_write_json(out / "run.json", new_run_record(config, resolve_scenario_names(config)))
+    write_run_record(out / "run.json", new_run_record(config, resolve_scenario_names(config)))

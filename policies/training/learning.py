@@ -17,10 +17,10 @@ from policies.registry import load_policy
 from policies.training.callbacks import CheckpointSaver, CurriculumCallback, HeldOutEvaluationCallback, ProgressCallback
 from policies.training.card import trained_card, with_card_evaluation
 from policies.training.config import FINE_TUNING_ONLY, TrainConfig, TrainingError
-from policies.training.run_record import open_run_record, resolve_scenario_names, restored_sampler
+from policies.training.run_record import open_run_record, resolve_scenario_names, restored_sampler, write_run_record
 from policies.training.scenario_envs import (ScenarioSampler, TrainEnvSpec, close_vec_env, evaluation_episodes,
                                              make_vec_env)
-from scenario_bank.atomic import atomic_path, atomic_write_json
+from scenario_bank.atomic import atomic_path
 
 __all__ = ["planned_steps", "train"]
 
@@ -118,7 +118,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         planned, plan = planned_steps(model, start, config.steps)
         if plan:
             log(plan)
-        atomic_write_json(run_path, record)
+        write_run_record(run_path, record)
         callbacks, saver = _callbacks(config, names, env_config, sampler, planned)
         began = time.perf_counter()
         remaining = config.steps - start
@@ -128,7 +128,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
                        "wall_time_s": round(time.perf_counter() - began, 3),
                        "resumed_from": checkpoint.name if resume else None}
             record["segments"].append(segment)
-            atomic_write_json(run_path, record)
+            write_run_record(run_path, record)
             return segment
 
         if remaining > 0:

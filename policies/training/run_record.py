@@ -14,11 +14,14 @@ from policies.training.config import TrainConfig, TrainingError
 from policies.training.scenario_envs import ScenarioSampler
 from scenario_bank import select_scenarios
 from scenario_bank.bank import Bank
+from scenario_bank.atomic import atomic_write_json
 from scenario_bank.run_identity import (BANK_IDENTITY, RunIdentityError, bank_identity, check_bank_unchanged,
                                         check_format, check_identity, check_run_kind, record_format)
+from scenario_bank.run_paths import as_read, read_paths, record_paths, resume_fix
 
 __all__ = [
     "new_run_record",
+    "write_run_record",
     "step_checkpoints",
     "latest_checkpoint",
     "load_run_config",
@@ -41,6 +44,12 @@ def new_run_record(config: TrainConfig, names: Sequence[str]) -> Dict[str, Any]:
     no segment yet."""
     return {**record_format(_RUN_SCHEMA, _RUN_VERSION), "config": config.to_json(),
             BANK_IDENTITY: bank_identity(Bank(config.bank_dir), names), CODE_IDENTITY: code_identity(), "segments": []}
+
+
+def write_run_record(path: Path, record: Mapping[str, Any]) -> None:
+    """Write ``run.json`` with the paths inside the run folder, or inside the loop folder holding it, relative to
+    that folder (:mod:`scenario_bank.run_paths`: a moved run folder resumes where it is)."""
+    atomic_write_json(path, record_paths(dict(record), path.parent))
 
 
 _CHECKPOINT = re.compile(r"^step_(\d+)\.zip$")
@@ -73,6 +82,7 @@ def load_run_config(out: os.PathLike | str) -> Tuple[TrainConfig, Dict[str, Any]
         raise TrainingError(f"{path} is not a readable run record ({error}); start a new run in another --out") from error
     check_format(record, _RUN_SCHEMA, _RUN_VERSION, folder=out, what="a training run", file=path.name,
                  error=TrainingError)
+    record = read_paths(record, out)  # paths in the run (or its loop) folder where they are now
     try:
         return TrainConfig.from_json(record["config"]), record
     except (KeyError, TypeError) as error:
@@ -103,8 +113,9 @@ def _check_resume(config: TrainConfig, record: Mapping[str, Any], names: Sequenc
     (``config``, :meth:`TrainConfig.to_json`'s form: a fine-tuning setting it leaves out is ``None`` on both sides),
     the scripts of its scenarios ``names`` and the code."""
     run = f"{config.out} holds a training run"
-    check_identity(record["config"], config.to_json(), TrainConfig.IDENTITY, run=run,
-                   fix="resume with the run's own settings (omit the option) or start a new run in another --out")
+    check_identity(record["config"], as_read(config.to_json(), config.out), TrainConfig.IDENTITY, run=run,
+                   fix=resume_fix(config.out, "resume with the run's own settings (omit the option) or start a new "
+                                              "run in another --out"))
     check_bank_unchanged(record.get(BANK_IDENTITY), bank_identity(Bank(config.bank_dir), names), run=run)
     check_code_unchanged(record, run=run, error=RunIdentityError)
 

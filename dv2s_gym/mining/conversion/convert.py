@@ -75,7 +75,8 @@ from dv2s_gym.mining.conversion.episodes import (actor_census, clip_episode, com
                                                  monitor_options, policy_name, reference_outcome, reproduce,
                                                  video_settings)
 from dv2s_gym.mining.conversion.files import (cluster_slug, CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_TRACE,
-                                              ENTRY_VIDEO, relative_to_run, run_relative, write_run_file)
+                                              ENTRY_VIDEO, provenance_run, relative_to_run, run_relative,
+                                              write_run_file)
 from dv2s_gym.mining.conversion.judge import judge_conversion
 from dv2s_gym.mining.conversion.parameters import compare_parameters, parent_script
 from dv2s_gym.mining.conversion.record import ConversionRecord, ConversionStatus
@@ -438,7 +439,7 @@ class _Conversion:
             **conversion_provenance(s.dra, s.sg, self.generation, self.description),
             backends={"dra": s.dra, "sg": s.sg},
             policy=policy_name(s.policy), failure=self.source_failure.to_dict(), cluster=self.cluster,
-            reproduction=out["reproduction"], e2e_sc=out["e2e_sc"], run=str(self.run_dir.resolve()),
+            reproduction=out["reproduction"], e2e_sc=out["e2e_sc"], run=provenance_run(self.run_dir, self.bank),
             index=record.index,
             interaction=self.interaction.to_dict(), judge={"avoidability": out.get("avoidability"),
                                                  "interaction_shown": self.shown, "reproduced": self.reproduced,

@@ -17,9 +17,10 @@ from pathlib import Path
 from typing import Any, Optional
 
 from scenario_bank.atomic import atomic_write_text
+from scenario_bank.run_paths import read_paths, record_paths
 
 __all__ = ["CONVERSION_DIR", "ENTRY_VIDEO", "ENTRY_TRACE", "ENTRY_CONVERTED_VIDEO", "cluster_slug", "write_run_file",
-           "run_relative", "relative_to_run"]
+           "run_relative", "relative_to_run", "provenance_run", "provenance_run_path"]
 
 
 CONVERSION_DIR = "conversion"
@@ -65,3 +66,21 @@ def relative_to_run(text: str, run_dir: Path) -> str:
     for where in dict.fromkeys((str(run_dir), str(run_dir.absolute()), str(run_dir.resolve()))):
         text = text.replace(where.rstrip(os.sep) + os.sep, "")
     return text
+
+
+def provenance_run(run_dir: Path, bank: Any) -> str:
+    """The ``run`` a bank entry's provenance names for the mining run in ``run_dir``: its absolute path, or, when
+    one loop folder holds the run and ``bank``, its path in that folder (``<loop>/round_1/mine``,
+    :mod:`scenario_bank.run_paths`), so the entry still names its run after the loop folder has moved."""
+    run = str(Path(run_dir).resolve())
+    root = getattr(bank, "root", None)
+    return record_paths(run, root) if root is not None else run
+
+
+def provenance_run_path(run: Any, bank: Any) -> Optional[Path]:
+    """The mining run folder a provenance's ``run`` names (:func:`provenance_run`) where it is now, resolved
+    (``None`` when it names none)."""
+    if not isinstance(run, str) or not run:
+        return None
+    root = getattr(bank, "root", None)
+    return Path(read_paths(run, root) if root is not None else run).resolve()

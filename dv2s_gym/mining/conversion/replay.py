@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Union
 
 from dv2s_gym.mining.conversion.episodes import monitor_options, policy_name, reference_passed
-from dv2s_gym.mining.conversion.files import (cluster_slug, CONVERSION_DIR, ENTRY_TRACE, ENTRY_VIDEO, relative_to_run,
-                                              write_run_file)
+from dv2s_gym.mining.conversion.files import (cluster_slug, CONVERSION_DIR, ENTRY_TRACE, ENTRY_VIDEO, provenance_run,
+                                              relative_to_run, write_run_file)
 from dv2s_gym.mining.conversion.rejection import check_settings, ConversionRejected, SETUP_ERRORS, stage_error
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.conversion.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
@@ -127,7 +127,7 @@ def _bank_replay(out: Dict[str, Any], record: EpisodeRecord, bank, parent: Any, 
                             video=ENTRY_VIDEO if ENTRY_VIDEO in files else None,
                             trace=ENTRY_TRACE if ENTRY_TRACE in files else None, generator="exact replay",
                             policy=policy_name(policy), failure=source_failure.to_dict(), cluster=source.cluster,
-                            run=str(source.run_dir.resolve()), index=record.index,
+                            run=provenance_run(source.run_dir, bank), index=record.index,
                             interaction=FailureInteraction.from_dict(source.interaction).to_dict(),
                             replay=dict(replay), e2e_sc=out["e2e_sc"],
                             date=datetime.date.today().isoformat())
