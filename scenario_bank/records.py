@@ -16,10 +16,11 @@ Each is a frozen dataclass (a :class:`JsonRecord`) with :meth:`from_dict` (check
 :class:`RecordError` names the bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the
 JSON object the files hold: the fields a record does not know travel in ``extra``, and a field that is ``None`` is
 written as ``null`` only when the file format always writes it (or the object read had it as ``null``:
-``null_fields``), so reading a file and writing it back changes no byte. The product reads a record by its
-attributes (``record.seed``, ``record.failure``); a record is also a read-only mapping over its JSON object
-(``record["seed"]``) for code written against the files' dict form. Whether a record read from ``{}`` holds anything
-is :func:`recorded`.
+``null_fields``), so reading a file and writing it back changes no byte. A record is read by its attributes
+(``record.seed``, ``record.failure``); it is no mapping: its JSON object is :meth:`JsonRecord.to_dict`. Two records
+are equal when they are of one type and their JSON objects are equal; a record is never equal to a dict (compare
+its :meth:`JsonRecord.to_dict`) and is always true (whether a record read from ``{}`` holds anything is
+:func:`recorded`).
 """
 
 from __future__ import annotations
@@ -28,9 +29,8 @@ import dataclasses
 import math
 import re
 import unicodedata
-from collections.abc import Mapping as _MappingABC
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Dict, FrozenSet, Iterator, Mapping, Optional, Tuple, Union
+from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple, Union
 
 from scenario_bank.elements import ElementError, normalize_elements
 from scenario_bank.errors import BankVersionError, DV2SError
@@ -151,10 +151,11 @@ def _items_json(value: Any) -> Any:
     return [plain(item) for item in value]
 
 
-class JsonRecord(_MappingABC):
+class JsonRecord:
     """What the records share (those of this module, and the other typed records of files the product writes,
-    such as a loop's rounds): the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and read-only
-    mapping access to it. Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
+    such as a loop's rounds): the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and equality
+    by it (records of one type with equal JSON objects are equal; a record is not a mapping and never equals a
+    dict). Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
     from it is the record's ``extra`` or ``null_fields``), the fields :meth:`from_dict` needs in ``_REQUIRED``,
     the fields nested records fill in ``_NESTED``, the lists or objects of records of one type in ``_ITEMS``
     and, in ``_ATTRIBUTES``, a JSON key held by an attribute of another name (a key that is also one of the
@@ -283,22 +284,12 @@ class JsonRecord(_MappingABC):
         out.update(self.extra)
         return out
 
-    def _json(self) -> Dict[str, Any]:
-        cached = self.__dict__.get("_cached_json")
-        if cached is None:
-            cached = self.to_dict()
-            object.__setattr__(self, "_cached_json", cached)
-        return cached
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return self.to_dict() == other.to_dict()
 
-    # Read-only mapping access to the JSON object, kept for code outside the product (the product reads fields).
-    def __getitem__(self, key: str) -> Any:
-        return self._json()[key]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._json())
-
-    def __len__(self) -> int:
-        return len(self._json())
+    __hash__ = None  # type: ignore[assignment]  # equal by a JSON object that may hold dicts
 
     def replace(self, **changes: Any):
         """A copy with ``changes`` (field names) applied; the record is frozen."""
