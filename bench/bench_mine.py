@@ -84,20 +84,20 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     run = mine(policy, settings, out=out, workers=WorkerSettings(workers=workers), progress=False, reports=False)
     seconds = time.perf_counter() - start
     failures = run.failures
-    avoidable = [r for r in failures if r.get("avoidable") is True]
+    avoidable = [r for r in failures if r.avoidable is True]
     clusters = set(run.clusters.values())
     from dv2s_gym.mining.sampling.rate import failure_rate
 
     rate = failure_rate(run.records, scenarios=list(run.settings.scenarios or ()) or None,
                         sampler=run.settings.sampler)
     overall = rate.overall if rate.available else None
-    avoidable_clusters = {run.clusters[int(r["index"])] for r in avoidable}
+    avoidable_clusters = {run.clusters[int(r.index)] for r in avoidable}
     return {
         "sampler": sampler, "seed": seed, "episodes": len(run.records),
-        "errors": sum(1 for r in run.records if r.get("error")), "failures": len(failures),
+        "errors": sum(1 for r in run.records if r.error), "failures": len(failures),
         "avoidable": len(avoidable), "clusters": len(clusters), "avoidable_clusters": len(avoidable_clusters),
-        "scenarios_failing": len({r["scenario"] for r in failures}),
-        "kinds": len({(r["scenario"], r["failure"]["kind"]) for r in failures}), "seconds": seconds,
+        "scenarios_failing": len({r.scenario for r in failures}),
+        "kinds": len({(r.scenario, r.failure.kind) for r in failures}), "seconds": seconds,
         "rate": (overall.value, overall.low, overall.high, overall.ess) if overall else None,
         "collapsed": rate.collapsed,
     }
@@ -295,10 +295,10 @@ def bench_saturation(policies: Sequence[str], seed: int, budget: int, large: int
         run = mine(policy, settings, out=out, workers=WorkerSettings(workers=workers), progress=False, reports=False)
         counts = {}
         for n in (budget, large):
-            failed = [r for r in run.records[:n] if r.get("failure") and not r.get("error")]
+            failed = [r for r in run.records[:n] if r.failure and not r.error]
             counts[n] = {"failures": len(failed), "clusters": len({cluster_id(r) for r in failed}),
                          "kinds": len({pair_of(r) for r in failed}),
-                         "scenarios_failing": len({r["scenario"] for r in failed})}
+                         "scenarios_failing": len({r.scenario for r in failed})}
         result[policy] = counts
         print(f"  {policy:24s} " + "; ".join(
             f"{BREADTH_NAMES[m]} {counts[budget][m]} at {budget} of {counts[large][m]} at {large} "

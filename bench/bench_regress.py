@@ -86,8 +86,8 @@ def run_harness(count: int, workers: int) -> Tuple[float, float, float]:
                                 workers=WorkerSettings(workers=workers), out_dir=out, progress=False,
                                 on_result=lambda _: ends.append(time.perf_counter()))
         seconds = time.perf_counter() - start
-    if report["errors"]:
-        raise RuntimeError(f"benchmark episodes ended in errors: {report['errors'][:2]}")
+    if report.errors:
+        raise RuntimeError(f"benchmark episodes ended in errors: {[error.to_dict() for error in report.errors[:2]]}")
     return seconds, ends[-1] - ends[0], ends[0] - start
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
+from typing import Any, ClassVar, FrozenSet, Mapping, Optional, Tuple
 
 from scenario_bank.records import JsonRecord
 
@@ -71,13 +71,6 @@ class FineTune(JsonRecord):
     null_fields: Optional[FrozenSet[str]] = None
 
     # sorted, as the card file is written
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "agreement": "object", "batch_size": "int", "beta": "number", "beta_decay": "number",
-        "disagreement_weight": "number", "epochs": "int", "history": "list", "iterations": "int",
-        "learning_rate": "number", "method": "str", "reference": "str", "resumed": "list",
-        "reward_weights": "object", "slower_weight": "number", "source": "str", "source_checkpoint": "str",
-        "source_steps": "int", "steps": "int", "weights": "object"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("history", "resumed")
     _WHAT: ClassVar[str] = "model card fine_tune"
 
     @property
@@ -109,9 +102,6 @@ class CardOverall(JsonRecord):
     null_fields: Optional[FrozenSet[str]] = None
 
     # sorted, as the card file is written
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "collision": "object", "episodes": "int", "errors": "int", "failure": "object", "mean_return": "number",
-        "mean_speed": "number", "off_road": "object", "success": "object"}
     _WHAT: ClassVar[str] = "model card results overall"
 
     def measure(self, name: str) -> Mapping[str, Any]:
@@ -133,8 +123,6 @@ class CardResults(JsonRecord):
     null_fields: Optional[FrozenSet[str]] = None
 
     # sorted, as the card file is written
-    _KINDS: ClassVar[Dict[str, str]] = {"outcomes": "object", "overall": "object", "per_scenario": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"overall": CardOverall}
     _WHAT: ClassVar[str] = "model card results"
 
 
@@ -162,12 +150,6 @@ class CardEvaluation(JsonRecord):
     null_fields: Optional[FrozenSet[str]] = None
 
     # sorted, as the card file is written
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "alpha": "number", "candidate": "str", "comparisons": "object", "confidence": "number",
-        "episodes_total": "int", "interval": "str", "policies": "object", "scenarios": "strings",
-        "seed_base": "int", "seeds_per_scenario": "int", "specs": "object", "summary": "strings"}
-    _ITEMS: ClassVar[Dict[str, type]] = {"policies": CardResults}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios", "summary")
     _WHAT: ClassVar[str] = "model card evaluation"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -205,12 +187,6 @@ class ModelCard(JsonRecord):
     null_fields: Optional[FrozenSet[str]] = None
 
     # sorted, as the card file is written
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "action_space": "str", "algorithm": "str", "bank": "object", "card_version": "int", "description": "str",
-        "env_config": "object", "env_id": "str", "evaluation": "object", "fine_tune": "object",
-        "hyperparameters": "object", "name": "str", "observation_space": "str", "policy": "str",
-        "sampler": "object", "training": "object", "versions": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"fine_tune": FineTune, "evaluation": CardEvaluation}
     _WHAT: ClassVar[str] = "model card"
 
     @property

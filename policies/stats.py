@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import operator
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
+from typing import Any, ClassVar, FrozenSet, Mapping, Optional, Tuple
 
 import numpy as np
 
@@ -101,11 +101,10 @@ class Rate(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"k": "int", "n": "int", "rate": "number", "low": "number", "high": "number"}
     _WHAT: ClassVar[str] = "rate"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
     @classmethod
     def of(cls, k: int, n: int, confidence: float = 0.95) -> "Rate":

@@ -19,21 +19,23 @@ Each is a frozen dataclass (a :class:`JsonRecord`) with :meth:`from_dict` (check
 :class:`RecordError` names the bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the
 JSON object the files hold: the fields a record does not know travel in ``extra``, and a field that is ``None`` is
 written as ``null`` only when the file format always writes it (or the object read had it as ``null``:
-``null_fields``), so reading a file and writing it back changes no byte. The product reads a record by its
-attributes (``record.seed``, ``record.failure``); a record is also a read-only mapping over its JSON object
-(``record["seed"]``) for code written against the files' dict form. Whether a record read from ``{}`` holds anything
-is :func:`recorded`.
+``null_fields``), so reading a file and writing it back changes no byte. A record is read by its attributes
+(``record.seed``, ``record.failure``); it is no mapping: its JSON object is :meth:`JsonRecord.to_dict`. Two records
+are equal when they are of one type and their JSON objects are equal; a record is never equal to a dict (compare
+its :meth:`JsonRecord.to_dict`) and is always true (whether a record read from ``{}`` holds anything is
+:func:`recorded`).
 """
 
 from __future__ import annotations
 
+import collections.abc
 import dataclasses
 import math
 import re
+import typing
 import unicodedata
-from collections.abc import Mapping as _MappingABC
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Dict, FrozenSet, Iterator, Mapping, Optional, Tuple, Union
+from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple, Union
 
 from scenario_bank.elements import ElementError, normalize_elements
 from scenario_bank.errors import BankVersionError, DV2SError
@@ -155,27 +157,128 @@ def _items_json(value: Any) -> Any:
     return [plain(item) for item in value]
 
 
-class JsonRecord(_MappingABC):
-    """What the records share (those of this module, and the other typed records of files the product writes,
-    such as a loop's rounds): the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and read-only
-    mapping access to it. Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
-    from it is the record's ``extra`` or ``null_fields``), the fields :meth:`from_dict` needs in ``_REQUIRED``,
-    the fields nested records fill in ``_NESTED``, the lists or objects of records of one type in ``_ITEMS``
-    and, in ``_ATTRIBUTES``, a JSON key held by an attribute of another name (a key that is also one of the
-    record's own attribute names)."""
+_JSON_KINDS = {str: "str", bool: "bool", int: "int", float: "number"}
+"""The JSON kinds (:data:`_CHECKS`) of fields annotated with plain types (a ``str`` subclass, such as a
+``StrEnum``, is a string too)."""
+_RECORD_FIELDS = ("extra", "null_fields")
+"""The fields every record has that are no key of its JSON object."""
 
-    _KINDS: ClassVar[Dict[str, str]] = {}
+
+def _optional_of(annotation: Any) -> Any:
+    """``X`` of ``Optional[X]``; any other annotation as it is."""
+    if typing.get_origin(annotation) is Union:
+        args = [arg for arg in typing.get_args(annotation) if arg is not type(None)]
+        if len(args) == 1:
+            return args[0]
+    return annotation
+
+
+def _is_record_type(annotation: Any) -> bool:
+    return isinstance(annotation, type) and issubclass(annotation, JsonRecord)
+
+
+def _annotation_kind(annotation: Any) -> Optional[Tuple[str, Optional[str], Optional[type]]]:
+    """``(kind, role, record type)`` of a field annotated ``annotation``: its JSON kind, and how
+    :meth:`JsonRecord.from_dict` reads it (``"nested"``: a record, ``"items"``: a tuple or mapping of records of the
+    record type, ``"list"``: a tuple; ``None``: as it is); ``None`` for an annotation that does not say."""
+    annotation = _optional_of(annotation)
+    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
+    if annotation is Any:
+        return "any", None, None
+    if _is_record_type(annotation):
+        return "object", "nested", annotation
+    if isinstance(annotation, type) and issubclass(annotation, str):
+        return "str", None, None
+    if annotation in _JSON_KINDS:
+        return _JSON_KINDS[annotation], None, None
+    if origin in (dict, collections.abc.Mapping):
+        return ("object", "items", args[1]) if args and _is_record_type(args[1]) else ("object", None, None)
+    if origin is tuple:
+        item = args[0] if args else Any
+        if _is_record_type(item):
+            return "objects", "items", item
+        if typing.get_origin(item) in (dict, collections.abc.Mapping):
+            return "objects", "list", None
+        return ("strings" if item is str else "list"), "list", None
+    return None
+
+
+def _field_tables(cls: type) -> Dict[str, Any]:
+    """The tables :class:`JsonRecord` reads a record class's JSON object by, derived from its fields' annotations
+    in their order (the JSON object's order): ``_KINDS`` (each JSON key's kind; ``_KIND_OVERRIDES`` replaces a
+    kind its annotation does not give), ``_NESTED``, ``_ITEMS`` and ``_LISTS``."""
+    tables: Dict[str, Any] = {"_KINDS": {}, "_NESTED": {}, "_ITEMS": {}, "_LISTS": ()}
+    if not dataclasses.is_dataclass(cls):
+        return tables
+    hints, keys = typing.get_type_hints(cls), {attribute: key for key, attribute in cls._ATTRIBUTES.items()}
+    lists = []
+    for item in dataclasses.fields(cls):
+        key = keys.get(item.name, item.name)
+        if item.name in _RECORD_FIELDS or (key in cls._KIND_OVERRIDES and cls._KIND_OVERRIDES[key] is None):
+            continue
+        derived = _annotation_kind(hints[item.name])
+        if derived is None and key not in cls._KIND_OVERRIDES:
+            raise RecordError(f"{cls.__qualname__}.{item.name}: the JSON kind of {hints[item.name]!r} is not known; "
+                            f"give it in {cls.__qualname__}._KIND_OVERRIDES")
+        kind, role, record = derived or (None, None, None)
+        tables["_KINDS"][key] = cls._KIND_OVERRIDES.get(key, kind)
+        if role == "nested":
+            tables["_NESTED"][key] = record
+        elif role == "items":
+            tables["_ITEMS"][key] = record
+        elif role == "list":
+            lists.append(key)
+    tables["_LISTS"] = tuple(lists)
+    return tables
+
+
+class _FieldTable:
+    """A table of a record class (``_KINDS``, ``_NESTED``, ``_ITEMS`` or ``_LISTS``) derived from its fields'
+    annotations on first use (:func:`_field_tables`); a class that sets the table itself keeps its own."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, record: Any, owner: type) -> Any:
+        tables = owner.__dict__.get("_derived_tables")
+        if tables is None:
+            tables = _field_tables(owner)
+            setattr(owner, "_derived_tables", tables)
+        return tables[self.name]
+
+
+class JsonRecord:
+    """What the records share (those of this module, and the other typed records of files the product writes,
+    such as a loop's rounds): the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and equality
+    by it (records of one type with equal JSON objects are equal; a record is not a mapping and never equals a
+    dict). A subclass is a frozen dataclass whose fields are the keys of its JSON object, in the object's order
+    (but ``extra`` and ``null_fields``); their annotations give each key's JSON kind (``_KINDS``: ``str``, ``int``,
+    ``float`` a number, ``bool``, ``Any``, a ``Mapping`` an object, ``Tuple[str, ...]`` a list of strings, another
+    tuple a list), the fields nested records fill (``_NESTED``: a record type), the lists or objects of records of
+    one type (``_ITEMS``: ``Tuple[Record, ...]``, ``Mapping[str, Record]``) and the lists read as tuples
+    (``_LISTS``). It sets, in ``_KIND_OVERRIDES``, the kind of a key its annotation does not give (or ``None``:
+    the field is no key of its own), the fields :meth:`from_dict` needs in ``_REQUIRED`` and, in ``_ATTRIBUTES``,
+    a JSON key held by an attribute of another name (a key that is also one of the record's own attribute
+    names)."""
+
+    _KINDS = _FieldTable()
+    _NESTED = _FieldTable()
+    _ITEMS = _FieldTable()
+    _LISTS = _FieldTable()
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {}
     _ATTRIBUTES: ClassVar[Dict[str, str]] = {}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ()
-    _NESTED: ClassVar[Dict[str, type]] = {}
-    _ITEMS: ClassVar[Dict[str, type]] = {}
-    _LISTS: ClassVar[Tuple[str, ...]] = ()
     _WHAT: ClassVar[str] = "record"
 
     def default_null_fields(self) -> FrozenSet[str]:
         """The fields :meth:`to_dict` writes as ``null`` when they are ``None`` and ``null_fields`` is not given:
         the ones the file format always writes."""
         return frozenset()
+
+    @classmethod
+    def json_fields(cls) -> FrozenSet[str]:
+        """The keys of the JSON object this record type knows (each a field; any other key is kept in ``extra``)."""
+        return frozenset(cls._KINDS)
 
     @classmethod
     def has_required(cls, data: Mapping[str, Any]) -> bool:
@@ -287,22 +390,12 @@ class JsonRecord(_MappingABC):
         out.update(self.extra)
         return out
 
-    def _json(self) -> Dict[str, Any]:
-        cached = self.__dict__.get("_cached_json")
-        if cached is None:
-            cached = self.to_dict()
-            object.__setattr__(self, "_cached_json", cached)
-        return cached
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return self.to_dict() == other.to_dict()
 
-    # Read-only mapping access to the JSON object, kept for code outside the product (the product reads fields).
-    def __getitem__(self, key: str) -> Any:
-        return self._json()[key]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._json())
-
-    def __len__(self) -> int:
-        return len(self._json())
+    __hash__ = None  # type: ignore[assignment]  # equal by a JSON object that may hold dicts
 
     def replace(self, **changes: Any):
         """A copy with ``changes`` (field names) applied; the record is frozen."""
@@ -372,15 +465,6 @@ class Provenance(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "kind": "str", "video": "str", "parent": "str", "seed": "int", "generator": "str", "model": "str",
-        "context_hash": "str", "date": "str", "params": "object", "backends": "object", "policy": "str",
-        "failure": "object", "cluster": "str", "reproduction": "object", "e2e_sc": "any", "run": "str",
-        "trace": "str", "index": "int", "merged": "objects", "interaction": "object", "judge": "object",
-        "replay": "object", "replay_entry": "str", "converted": "str", ENTRY_FILES: "strings",
-        "converted_video": "str", "scenic2_rewrites": "strings", "scenic2_notes": "strings",
-    }
-    _LISTS: ClassVar[Tuple[str, ...]] = ("merged", ENTRY_FILES, "scenic2_rewrites", "scenic2_notes")
     _WHAT: ClassVar[str] = "provenance"
 
     @classmethod
@@ -421,26 +505,20 @@ class Sidecar(JsonRecord):
     (all but ``story``).
     """
 
-    description: str = ""
-    map: str = ""
-    name: Optional[str] = None
     schema_version: Optional[int] = None
+    name: Optional[str] = None
+    description: str = ""
     elements: Optional[Mapping[str, Any]] = None
     story: Optional[Any] = None
     tags: Tuple[str, ...] = ()
+    map: str = ""
     use_case: Optional[str] = None
     source: Optional[Provenance] = None
     content_hash: Optional[str] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "schema_version": "int", "name": "str", "description": "str", "elements": "object", "story": "any",
-        "tags": "strings", "map": "str", "use_case": "str", "source": "object", "content_hash": "str",
-    }
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("description", "map")
-    _NESTED: ClassVar[Dict[str, type]] = {"source": Provenance}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("tags",)
     _WHAT: ClassVar[str] = "sidecar"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -545,6 +623,7 @@ class Failure(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
+    # The JSON object's order is not the fields' (the positional constructor detectors call keeps its order).
     _KINDS: ClassVar[Dict[str, str]] = {
         "type": "str", "time": "number", "step": "int", "with_kind": "str", "collision_type": "str",
         "min_ttc": "number", "speed": "number", "with": "str", "kind": "str",
@@ -611,7 +690,6 @@ class Behaviour(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"actor": "str", "actor_manoeuvre": "str", "ego_manoeuvre": "str"}
     _WHAT: ClassVar[str] = "behaviour"
 
     def complete(self) -> "Behaviour":
@@ -661,15 +739,7 @@ class EpisodeRecord(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "index": "int", "scenario": "str", "seed": "int", "policy": "str", "params": "object", "result": "object",
-        "failure": "object", "rho": "number", "reference": "object", "avoidable": "bool", "trace": "str",
-        "error": "str", "family": "str", "behaviour": "object", "failure_state": "list",
-        "worker_restarts": "list", "sampler": "str", "point": "any", "proposal": "any",
-    }
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("index", "scenario", "seed")
-    _NESTED: ClassVar[Dict[str, type]] = {"failure": Failure, "behaviour": Behaviour}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("failure_state", "worker_restarts")
     _WHAT: ClassVar[str] = "episode record"
 
     def __post_init__(self) -> None:
@@ -759,16 +829,8 @@ class RegressEpisode(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "id": "str", "role": "str", "scenario": "str", "seed": "int", "scene_seed": "int", "params": "object",
-        "collided": "bool", "collisions": "list", "off_road": "bool", "success": "bool", "failed": "bool",
-        "min_ttc": "number", "mean_speed": "number", "distance": "number", "episode_return": "number",
-        "steps": "int", "trajectory_hash": "str", "error": "str", "extra": "object", "trace": "str",
-        "stalled": "bool", "stall_time": "number", "failure_kinds": "strings",
-    }
     _ATTRIBUTES: ClassVar[Dict[str, str]] = {"extra": "result_extra"}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("id", "role", "scenario", "seed")
-    _LISTS: ClassVar[Tuple[str, ...]] = ("collisions", "failure_kinds")
     _WHAT: ClassVar[str] = "regression result"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -803,12 +865,7 @@ class HeldOutEpisode(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "role": "str", "scenario": "str", "seed": "int", "policy": "str", "failed": "bool", "failure": "object",
-        "result": "object", "error": "str",
-    }
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("role", "scenario", "seed")
-    _NESTED: ClassVar[Dict[str, type]] = {"failure": Failure}
     _WHAT: ClassVar[str] = "held-out episode"
 
     def __post_init__(self) -> None:

@@ -3,15 +3,16 @@
 
 from __future__ import annotations
 
-from typing import Any, Dict
+from typing import Any
 
 from dv2s_gym.regress import runner
+from dv2s_gym.regress.records import RegressReport
 
 _WORKER_OPTIONS = ("backend", "workers", "address", "timeout")
 _RUN_OPTIONS = ("out_dir", "progress", "on_result", "clips")
 
 
-def run_regression(candidate: str, baseline: Any = None, **options: Any) -> Dict[str, Any]:
+def run_regression(candidate: str, baseline: Any = None, **options: Any) -> RegressReport:
     """:func:`~dv2s_gym.regress.runner.run_regression` with ``baseline_report``, ``baseline_role`` and
     ``accept_failed_baseline`` making its :class:`~dv2s_gym.regress.settings.BaselineReport`, the worker options
     its :class:`~dv2s_gym.workers.settings.WorkerSettings` and the rest its

@@ -56,7 +56,7 @@ def test_add_with_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
                                 source=mined(1)), on_duplicate="merge")
     assert first.status == "added" and first.entry.name == "mined_stop"
     assert first.entry.source.kind == "mined" and first.entry.source.index == 1
-    assert first.entry.source["reproduction"] is None  # every mined field is present, unknown ones None
+    assert first.entry.source.to_dict()["reproduction"] is None  # every mined field is present, unknown ones None
     near = bank.add(A_NEAR, Sidecar(description="A car stands still ahead.", name="mined_stop", elements=ELEMENTS,
                                     source=mined(2)), on_duplicate="merge")
     assert near.status == "merged" and near.entry.name == "mined_stop" and "near-duplicate" in near.how
@@ -73,7 +73,7 @@ def test_add_with_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
     assert [m["index"] for m in merged] == [2, 3]
     assert merged[0]["description"] == "A car stands still ahead." and merged[0]["content_hash"]
     assert reread.get("mined_stop").script == A  # the entry itself is unchanged
-    assert "merged" not in reread.get("mined_stop_2").source
+    assert "merged" not in reread.get("mined_stop_2").source.to_dict()
     # Bank.add keeps refusing duplicates
     from scenario_bank.bank import DuplicateScenarioError
 

@@ -80,7 +80,7 @@ def test_converting_a_folder_into_a_bank_adds_each_checked_scenario_with_its_pro
     expected = {"kind": "generated", "video": str(source / CLIP.name), "seed": 3, "generator": "dra=bev,sg=rules",
                 "model": report["generation"]["model"] or report["description"]["model"],
                 "context_hash": report["generation"]["context_hash"], "date": datetime.date.today().isoformat()}
-    assert {key: entry.source.get(key) for key in expected} == expected
+    assert {key: entry.source.to_dict().get(key) for key in expected} == expected
     assert "generated" in entry.tags
 
 

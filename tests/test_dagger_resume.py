@@ -274,7 +274,7 @@ def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkey
     resumed = [line for line in lines if "resumed from iteration 1 of 4" in line]
     assert len(resumed) == 1 and resumed[0].startswith("DAgger: resumed from iteration 1 of 4")  # said once
     assert "DAgger iteration 1/4" not in "\n".join(lines)  # not redone
-    tuned = report.rounds[0]["steps"]["fine_tune"]
+    tuned = report.rounds[0].to_dict()["steps"]["fine_tune"]
     # subprocess envs put back where they were too
     assert tuned["resumed"] == [{"from_iteration": 1, "steps_into_next": 0, "envs_reproduced": True}]
     assert [h["iteration"] for h in read_card(tuned["model"]).fine_tune.history] == [1, 2, 3, 4]

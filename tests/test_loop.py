@@ -279,12 +279,12 @@ def test_paired_evaluation_runs_identical_episodes_before_and_after(tmp_path):
     before = evaluate_heldout("before", "keep_lane", episodes, store=store, bank_dir=None, progress=False)
     after = evaluate_heldout("after", "keep_lane", episodes, store=store, bank_dir=None, workers=WorkerSettings(workers=2),
                              progress=False)
-    assert [(r["scenario"], r["seed"]) for r in before] == [(r["scenario"], r["seed"]) for r in after] == episodes
+    assert [(r.scenario, r.seed) for r in before] == [(r.scenario, r.seed) for r in after] == episodes
     # same policy, same scene and seed: the very same trajectory, so the pairing is real
-    assert [r["result"]["trajectory_hash"] for r in before] == [r["result"]["trajectory_hash"] for r in after]
+    assert [r.result["trajectory_hash"] for r in before] == [r.result["trajectory_hash"] for r in after]
     summary = paired_summary(held(before), held(after))
-    assert summary["pairs"] == 4 and summary["table"]["before_only"] == summary["table"]["after_only"] == 0
-    assert summary["mcnemar_p"] == 1.0
+    assert summary.pairs == 4 and summary.table.before_only == summary.table.after_only == 0
+    assert summary.mcnemar_p == 1.0
     # a reopened store serves the finished episodes without running them
     again = evaluate_heldout("before", "no.such:policy", episodes, store=HeldOutStore(tmp_path / "heldout.jsonl"),
                              bank_dir=None, progress=False)
@@ -297,15 +297,15 @@ def test_held_out_workers_that_crash_or_hang_give_error_records_not_failures(tmp
     store = HeldOutStore(tmp_path / "heldout.jsonl")
     crashed = evaluate_heldout("before", "regress_misbehaving_policies:crash", episodes, store=store, bank_dir=None,
                                workers=WorkerSettings(workers=2), progress=False)
-    assert [(r["scenario"], r["seed"]) for r in crashed] == episodes
-    assert all("crashed" in r["error"] and "2 attempts" in r["error"] for r in crashed)
+    assert [(r.scenario, r.seed) for r in crashed] == episodes
+    assert all("crashed" in r.error and "2 attempts" in r.error for r in crashed)
     hung = evaluate_heldout("after", "regress_misbehaving_policies:hang", episodes[:1], store=store, bank_dir=None,
                             workers=WorkerSettings(workers=2, timeout=3), progress=False)
-    assert "hung" in hung[0]["error"]
+    assert "hung" in hung[0].error
     # errors are left out of the pairs, never counted as failures, and stay errors on a reopened store
-    assert paired_summary(crashed[:1], hung)["errors"] == 1
+    assert paired_summary(crashed[:1], hung).errors == 1
     reopened = HeldOutStore(tmp_path / "heldout.jsonl").records
-    assert len(reopened) == 3 and all(record["error"] for record in reopened.values())
+    assert len(reopened) == 3 and all(record.error for record in reopened.values())
 
 
 def test_paired_summary_counts_and_drop():

@@ -128,7 +128,7 @@ def test_the_loop_runs_end_to_end_with_dagger(tmp_path):
     tiny = dict(budget=6, fine_tune_steps=200, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
                 scenarios=SOURCES, min_heldout_episodes=1, untouched_seeds=0, log=lambda _: None)
     report = run_loop("dv2s-ppo", out=out, miner=miner, fine_tune_method="dagger", **tiny)
-    steps = report.rounds[0]["steps"]
+    steps = report.rounds[0].to_dict()["steps"]
     assert set(steps) == {"mine", "split", "reference", "before", "fine_tune", "control", "after", "regress"}
     assert steps["control"]["method"] == "dagger" and steps["control"]["steps"] == tiny["fine_tune_steps"]
     tuned = steps["fine_tune"]

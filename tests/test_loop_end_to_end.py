@@ -46,10 +46,10 @@ def test_one_round_of_the_real_loop(tmp_path, capsys):
     assert not {r["cluster"] for r in replay_rows} & {c["cluster"] for c in conversions}  # one replay per cluster
     # the failing scenes, kept exactly: those of the converted clusters and those of the others (replays.jsonl)
     replays = {c["replay_entry"] for c in conversions + replay_rows if c.get("replay_entry")}
-    mined = {e.name for e in bank if e.source.get("kind") == "mined"}
+    mined = {e.name for e in bank if e.source.kind == "mined"}
     assert replays and mined == kept | replays and set(bank.names()) == shipped | kept | replays
     for name in replays:
-        assert "replay" in bank.get(name).tags and bank.get(name).source["parent"] in SCENARIOS
+        assert "replay" in bank.get(name).tags and bank.get(name).source.parent in SCENARIOS
     for row in conversions:
         assert row["status"] in ("kept", "merged", "rejected")
         if row["status"] == "rejected":
@@ -57,7 +57,7 @@ def test_one_round_of_the_real_loop(tmp_path, capsys):
         else:
             assert row["reproduction"]["rate"] >= 0.3
     for name in kept:
-        source = bank.get(name).source
+        source = bank.get(name).source.to_dict()
         assert source["parent"] in SCENARIOS and source["reproduction"]["rate"] >= 0.3
         assert (bank.get(name).folder / source["video"]).is_file()  # carried in the entry folder
 

@@ -132,7 +132,7 @@ def test_resume_from_records_alone_and_with_a_larger_budget_equals_an_uninterrup
     copy = tmp_path / "copy"
     shutil.copytree(out, copy)
     records = read_records(copy / "episodes.jsonl")
-    kept = [r for r in records if r["index"] not in (4, 7, 8, 11)]  # holes: finished out of order, then killed
+    kept = [r for r in records if r.index not in (4, 7, 8, 11)]  # holes: finished out of order, then killed
     (copy / "episodes.jsonl").write_text("".join(json.dumps(r.to_dict(), sort_keys=True) + "\n" for r in kept))
     (copy / "sampler.pkl").unlink()
     resumed = mine(POLICY, out=copy, workers=2, **RUN)

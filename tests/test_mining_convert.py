@@ -183,7 +183,7 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert rerun["matches"] and rerun["trajectory_hash"] == record["result"]["trajectory_hash"]
     assert same_failure_class(Failure.of(record["failure"]), Failure.of(rerun["failure"]))
     entry = fresh.get(out.to_dict()["bank_entry"])
-    source = entry.source
+    source = entry.source.to_dict()
     assert source["kind"] == "mined" and source["parent"] == SCENARIO and source["seed"] == 0
     portable = {**record["result"]["params"], "map": "urban_two_way.xodr"}  # the map by name, not by path
     assert source["params"] == portable and source["params"]["ego_speed"] == record["params"]["ego_speed"]
@@ -469,7 +469,8 @@ def test_a_script_without_the_failures_interaction_is_rejected_though_the_policy
     assert _converted(tmp_path / "bank") == []
     # the failure itself is kept exactly all the same
     replay = Bank(tmp_path / "bank").get(out.to_dict()["replay_entry"])
-    assert replay.source["converted"] is None and replay.source["converted_rejections"] == [out.to_dict()["reason"]]
+    assert replay.source.to_dict()["converted"] is None
+    assert replay.source.to_dict()["converted_rejections"] == [out.to_dict()["reason"]]
 
 
 def test_each_failed_check_of_the_judge_is_its_own_reason():

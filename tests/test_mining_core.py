@@ -424,9 +424,10 @@ def whole_run(request, tmp_path_factory):
 def test_a_run_records_every_episode_with_its_scene(whole_run):
     out, run, settings = whole_run
     records = read_records(out / "episodes.jsonl")
-    assert [r["index"] for r in records] == list(range(10)) and not any(r["error"] for r in records)
-    assert [r["seed"] for r in records] == [episode_seed(5, i) for i in range(10)]
-    for record in records:
+    rows = [r.to_dict() for r in records]  # each line's JSON object
+    assert [r["index"] for r in rows] == list(range(10)) and not any(r["error"] for r in rows)
+    assert [r["seed"] for r in rows] == [episode_seed(5, i) for i in range(10)]
+    for record in rows:
         assert record["scenario"] in (BRAKES, LEFT_TURN) and record["sampler"] == settings["sampler"]
         assert record["family"] == record["scenario"]  # shipped scenarios are their own family
         assert (record["rho"] < 0) == (record["failure"] is not None)
@@ -465,7 +466,7 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
             expected.append((spec.scenario, spec.params))
             sampler.feed(point, info, _fed(record, records, feedback))
             drawn += sampler.draw(1)
-        assert [(r["scenario"], r["params"]) for r in records] == expected
+        assert [(r["scenario"], r["params"]) for r in rows] == expected
         return
     for _ in range(3):
         drawn = sampler.draw(MINE["batch"])
@@ -475,23 +476,24 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
             record = records[len(expected) - 1] if len(expected) <= len(records) else None
             if record is not None:
                 sampler.feed(point, info, _fed(record, records, feedback))
-    assert [(r["scenario"], r["params"]) for r in records] == expected[:10]
+    assert [(r["scenario"], r["params"]) for r in rows] == expected[:10]
 
 
 def _fed(record, records, feedback):
     """What the miner feeds back for ``record`` (written out here from the documented rule)."""
     from dv2s_gym.mining.cluster import cell_id
 
-    if record["failure"] and feedback == "novelty":  # novelty is over parameter cells, not behaviour clusters
-        earlier = {cell_id(r) for r in records if r["index"] < record["index"] and r["failure"]}
+    row, rows = record.to_dict(), [r.to_dict() for r in records]
+    if row["failure"] and feedback == "novelty":  # novelty is over parameter cells, not behaviour clusters
+        earlier = {cell_id(r) for r, data in zip(records, rows) if data["index"] < row["index"] and data["failure"]}
         if cell_id(record) in earlier:
             return 9.0
-    if record["failure"] and feedback == "state-novelty":  # over the failure-state descriptors, per scenario
-        earlier = [r["failure_state"] for r in records
-                   if r["index"] < record["index"] and r["failure"] and r["scenario"] == record["scenario"]]
-        if any(math.dist(record["failure_state"], other) <= NOVELTY_RADIUS for other in earlier):
+    if row["failure"] and feedback == "state-novelty":  # over the failure-state descriptors, per scenario
+        earlier = [r["failure_state"] for r in rows
+                   if r["index"] < row["index"] and r["failure"] and r["scenario"] == row["scenario"]]
+        if any(math.dist(row["failure_state"], other) <= NOVELTY_RADIUS for other in earlier):
             return 9.0
-    return record["rho"]
+    return row["rho"]
 
 
 def test_novelty_feedback_feeds_a_repeated_parameter_cell_as_an_easy_scene():
@@ -624,7 +626,7 @@ def test_an_episode_finished_after_its_worker_crashed_is_reported(tmp_path):
     assert not any(r.to_dict()["error"] for r in run.records) and run.records[1].to_dict()["result"]["trajectory_hash"]
     restarts = run.records[1].to_dict()["worker_restarts"]
     assert len(restarts) == 1 and "crashed" in restarts[0]
-    assert "worker_restarts" not in run.records[0] and "worker_restarts" not in run.records[2]
+    assert "worker_restarts" not in run.records[0].to_dict() and "worker_restarts" not in run.records[2].to_dict()
     assert "1 finished after their worker crashed or hung" in run.summary()
     assert "avoidability not checked" in run.summary()  # reference=None; it said "3 avoidable by no reference"
     from dv2s_gym.mining.report import write_reports

@@ -47,7 +47,7 @@ def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(r
     shutil.rmtree(tmp_path / "run2")
 
     entry = Bank(tmp_path / "bank").get(out.to_dict()["bank_entry"])
-    source = entry.source
+    source = entry.source.to_dict()
     assert source["video"] == "failure.webm" and source["trace"] == "trace.json.gz"
     assert source["merged"][0]["video"] == "merged/1/failure.webm"
     assert source["merged"][0]["trace"] == "merged/1/trace.json.gz"
@@ -57,8 +57,8 @@ def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(r
     assert source["merged"][0]["files"] == ["merged/1/failure.webm", "merged/1/trace.json.gz",
                                             "merged/1/converted.webm"]
     assert source["merged"][0]["converted_video"] == "merged/1/converted.webm"
-    assert entry_files(source) == ["failure.webm", "trace.json.gz", "converted.webm", "merged/1/failure.webm",
-                                   "merged/1/trace.json.gz", "merged/1/converted.webm"]
+    assert entry_files(entry.source) == ["failure.webm", "trace.json.gz", "converted.webm", "merged/1/failure.webm",
+                                         "merged/1/trace.json.gz", "merged/1/converted.webm"]
     assert (entry.folder / "converted.webm").stat().st_size > 0
     assert entry.missing_files() == []
     clip = read_video(entry.folder / "failure.webm", fps=None, max_frames=1000, max_pixels=10**7)

@@ -90,8 +90,9 @@ def test_the_exact_replay_is_kept_when_the_video_stage_fails(record, user_bank, 
     assert out.to_dict()["reason"] == "video: OSError: no space left on device" and out.to_dict()["rejections"] == [out.to_dict()["reason"]]
     assert out.to_dict()["video"] is None and out.to_dict()["replay_entry"] is not None
     entry = Bank(bank).get(out.to_dict()["replay_entry"])
-    assert entry.source["converted_rejections"] == [out.to_dict()["reason"]]
-    assert entry.source["video"] is None and entry.source["trace"] == "trace.json.gz"
+    source = entry.source.to_dict()
+    assert source["converted_rejections"] == [out.to_dict()["reason"]]
+    assert source["video"] is None and source["trace"] == "trace.json.gz"
     assert replay_failure(bank, out.to_dict()["replay_entry"])["matches"]
     # a replay that fails as well is recorded beside the video's reason
     diverged = convert_failure({**record, "result": {**record["result"], "trajectory_hash": "0" * 64}},

@@ -92,8 +92,8 @@ def test_the_cross_entropy_sampler_s_densities_recover_the_true_rates():
     values = []
     for seed in range(6):
         records = _cross_entropy_run(dimensions=1, draws=500, seed=seed)
-        drawn = [r for r in records if r["scenario"] == "s0"]
-        assert sum(1 for r in drawn if r["failure"]) / len(drawn) > 0.5  # what the sampler saw
+        drawn = [r for r in records if r.scenario == "s0"]
+        assert sum(1 for r in drawn if r.failure) / len(drawn) > 0.5  # what the sampler saw
         rate = failure_rate(records, scenarios=["s0", "s1"], sampler="cross-entropy")
         assert rate.available and rate.scenarios["s1"].value == 0.0
         s0, overall = rate.scenarios["s0"], rate.overall
@@ -158,10 +158,10 @@ def test_the_novelty_bandit_s_densities_recover_the_true_rates():
     values = []
     for seed in range(8):
         records = _novelty_bandit_run(draws=400, seed=seed)
-        shares = {name: sum(1 for r in records if r["scenario"] == name) / len(records) for name in ("s0", "s1", "s2")}
+        shares = {name: sum(1 for r in records if r.scenario == name) / len(records) for name in ("s0", "s1", "s2")}
         assert shares["s2"] < 0.2 < shares["s0"]  # not uniform: the scenario that never fails is drawn least
-        assert min(r["proposal"]["scenario"] for r in records) == pytest.approx(0.2 / 3)  # never below explore / S
-        assert all(r["proposal"]["params"] == 1.0 and r["proposal"]["floor"] >= 0.2 - 1e-9 for r in records)
+        assert min(r.proposal["scenario"] for r in records) == pytest.approx(0.2 / 3)  # never below explore / S
+        assert all(r.proposal["params"] == 1.0 and r.proposal["floor"] >= 0.2 - 1e-9 for r in records)
         rate = failure_rate(records, scenarios=["s0", "s1", "s2"], sampler="novelty-bandit")
         assert rate.available and not rate.collapsed
         assert rate.scenarios["s2"].value == 0.0

@@ -416,9 +416,10 @@ def test_the_report_of_a_real_mining_run_matches_its_records(tmp_path):
     assert set(run.reports) == {"json", "markdown", "html"}
     report = json.loads((out / "report.json").read_text())
     records = read_records(out / "episodes.jsonl")
-    failed = [r for r in records if r["failure"] and not r["error"]]
+    rows = [r.to_dict() for r in records]  # each line's JSON object
+    failed = [r for r in rows if r["failure"] and not r["error"]]
     clusters = cluster_failures(records)
-    assert report["counts"]["episodes"] == sum(not r["error"] for r in records) == 8 - report["counts"]["errors"]
+    assert report["counts"]["episodes"] == sum(not r["error"] for r in rows) == 8 - report["counts"]["errors"]
     assert report["counts"]["failures"] == len(failed)
     assert report["counts"]["avoidable"] == sum(r["avoidable"] is True for r in failed)
     assert report["counts"]["clusters"] == len(set(clusters.values()))

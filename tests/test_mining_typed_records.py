@@ -18,8 +18,8 @@ too), :class:`~dv2s_gym.mining.tasks.MineTask` per episode (its JSON object only
 :class:`~dv2s_gym.mining.settings.RunOrigin`; ``settings.json`` is written from them and read back only to check a
 resumed run's identity.
 
-The product reads a typed record by its fields; its JSON object is its ``to_dict``
-(:func:`test_a_record_says_whether_it_holds_anything_and_round_trips`).
+A typed record is no mapping (:func:`test_a_typed_record_is_no_mapping`): it is read by its fields, and its JSON object
+is its ``to_dict``.
 """
 
 from __future__ import annotations
@@ -490,19 +490,32 @@ def _record_classes() -> List[type]:
     return found
 
 
-def test_a_record_says_whether_it_holds_anything_and_round_trips():
-    """``recorded`` tells a record read from ``{}`` from one that holds fields; a record's JSON object is its
-    ``to_dict``, and two records of one JSON object are equal."""
+MAPPING_METHODS = ("__getitem__", "__iter__", "__len__", "__contains__", "keys", "get", "items", "values")
+"""What a record would have if it were read by key like the JSON object it stands for."""
+
+
+def test_a_typed_record_is_no_mapping():
+    """A record is read by its fields; its JSON object is its ``to_dict``. No record class is a ``Mapping`` or has a
+    mapping's methods, so a reader that reads one by key fails at once instead of reading a misspelled key as
+    ``None``."""
+    from collections.abc import Mapping
+
     from scenario_bank.records import EpisodeRecord, Provenance, recorded
 
     classes = _record_classes()
     assert len(classes) > 40 and EpisodeRecord in classes  # every record module was found
+    mappings = [c.__qualname__ for c in classes + [JsonRecord] if issubclass(c, Mapping)]
+    assert not mappings, f"typed records that are mappings: {mappings}"
+    keyed = [f"{c.__qualname__}.{name}" for c in classes + [JsonRecord] for name in MAPPING_METHODS if hasattr(c, name)]
+    assert not keyed, f"typed records read by key: {keyed}"
     empty = Provenance.from_dict({})
-    assert empty.to_dict() == {} and not recorded(empty) and not recorded(None)
+    assert empty.to_dict() == {} and bool(empty) and not recorded(empty) and not recorded(None)
     episode = {"index": 0, "scenario": "s", "seed": 1}
     assert EpisodeRecord.from_dict(episode) == EpisodeRecord.from_dict(dict(episode))
-    assert recorded(EpisodeRecord.from_dict(episode)) and EpisodeRecord.from_dict(episode).to_dict() == episode
-
+    assert recorded(EpisodeRecord.from_dict(episode))
+    assert EpisodeRecord.from_dict(episode) != episode and EpisodeRecord.from_dict(episode).to_dict() == episode
+    with pytest.raises(TypeError):
+        EpisodeRecord.from_dict(episode)["seed"]
 
 
 _FAILURE_KEYS = ("type", "time", "step", "with", "with_kind", "collision_type", "min_ttc", "speed", "kind", "actor",

@@ -66,11 +66,11 @@ def test_regress_records_a_plugin_type_alike_with_one_and_two_workers(plugin, tm
                               env_config={"duration": 5}, failure=["collision", plugin.NAME], progress=False,
                               clips=False) for workers in (1, 2)]
     episodes = [[(e["id"], e["candidate"]["error"], e["candidate"]["hard_braked"], e["candidate"]["failure_kinds"])
-                 for e in report["episodes"]] for report in reports]
+                 for e in report.to_dict()["episodes"]] for report in reports]
     assert episodes[0] == episodes[1]
     assert not any(error for _, error, _, _ in episodes[0])
     assert {braked for _, _, braked, _ in episodes[0]} == {True, False}
-    assert reports[0]["scenarios"][SCENARIOS[0]]["candidate"]["hard_brake_rate"]["count"] >= 1
+    assert reports[0].to_dict()["scenarios"][SCENARIOS[0]]["candidate"]["hard_brake_rate"]["count"] >= 1
 
 
 @pytest.fixture
@@ -244,6 +244,6 @@ def test_a_policy_registered_by_an_imported_module_reaches_the_workers(registrie
         report = run_regression(plugin_policy.NAME, scenarios=SCENARIOS[:1], episodes=2, workers=2,
                                 out_dir=tmp_path / "regress", env_config={"duration": 6}, progress=False,
                                 clips=False)
-        assert [e["candidate"]["error"] for e in report["episodes"]] == [None, None]
+        assert [e["candidate"]["error"] for e in report.to_dict()["episodes"]] == [None, None]
     finally:
         sys.modules.pop("tests.plugin_idle_policy", None)

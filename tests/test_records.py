@@ -158,7 +158,7 @@ def test_a_listed_entry_carries_its_typed_sidecar_and_a_malformed_one_is_a_probl
 
 def test_an_episode_record_round_trips_and_reads_its_outcome():
     record = EpisodeRecord.from_dict(EPISODE)
-    assert record.to_dict() == EPISODE and record == EpisodeRecord.from_dict(EPISODE)
+    assert record.to_dict() == EPISODE and record == EpisodeRecord.from_dict(EPISODE) and record != EPISODE
     assert record.failure_state == (0.5, 1.0) and "worker_restarts" not in record.to_dict()
     assert record.id == "highway_lead_vehicle_brakes/1234" and record.failed and record.outcome == "failed"
     assert record.failure_type == "collision" and record.mean_speed == 21.5 and record.min_ttc == 0.4

@@ -47,10 +47,10 @@ def noisy_run(tmp_path_factory):
 @pytest.mark.slow
 def test_report_has_the_documented_schema(noisy_run):
     out, report = noisy_run
-    assert report == json.loads((out / "report.json").read_text())
+    assert report.to_dict() == json.loads((out / "report.json").read_text())
     assert report.to_dict()["schema"] == SCHEMA == "dv2s-regress" and report.to_dict()["schema_version"] == SCHEMA_VERSION == 2
     assert {"created", "dv2s_version", "bank", "settings", "candidate", "baseline", "episodes", "scenarios",
-            "overall", "verdict", "regressed", "newly_failing", "errors", "stopped_early"} <= report.keys()
+            "overall", "verdict", "regressed", "newly_failing", "errors", "stopped_early"} <= report.to_dict().keys()
     assert report.to_dict()["bank"]["scenarios"] == PAIR and len(report.to_dict()["bank"]["version"]) == 64
     assert {"path", "version", "scenarios"} <= report.to_dict()["bank"].keys()
     assert {"episodes", "seed", "margin", "alpha", "sequential", "env_config", "backend", "workers"} <= \
@@ -350,7 +350,7 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
             "trace_dir": None}
     with backend:
         backend.run([task, {**task, "seed": 5}], results.append)
-    by_seed = {r["seed"]: r for r in results}
+    by_seed = {r.seed: r.to_dict() for r in results}  # each result as results.jsonl holds it
     assert by_seed[4]["error"] == "RuntimeError: deliberate failure on seed 4" and by_seed[4]["id"].endswith("/4")
     assert not by_seed[5].get("error") and by_seed[5]["steps"] == 10
 
@@ -372,7 +372,7 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     failing = [dict(e, candidate=dict(ok, failed=True)) for e in episodes]
     failing[0] = episodes[0]
     assert build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
-                        episodes=failing)["verdict"] == "ERROR"
+                        episodes=failing).to_dict()["verdict"] == "ERROR"
     # and a measures-only run with an error has the verdict ERROR, not none
     alone = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline=None,
                          episodes=[dict(e, baseline=None) for e in episodes])

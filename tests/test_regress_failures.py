@@ -31,17 +31,17 @@ def test_failure_kinds_are_parsed_and_applied():
 def test_a_policy_that_stands_still_fails_by_stalling(tmp_path):
     report = run_regression(STOP, "rule", scenarios=[FREE_ROAD], episodes=6, workers=2, out_dir=tmp_path / "stall",
                             env_config=CONFIG, progress=False, clips=False)
-    candidate = report["scenarios"][FREE_ROAD]["candidate"]
+    candidate = report.to_dict()["scenarios"][FREE_ROAD]["candidate"]
     assert candidate["stall_rate"]["value"] == 1.0 and candidate["collision_rate"]["value"] == 0.0
     assert candidate["failure_rate"]["value"] == 1.0
-    assert report["verdict"] == "FAIL" and report["regressed"] == [FREE_ROAD]
-    assert all(e["candidate"]["failure_kinds"] == ["stall"] for e in report["episodes"])
-    assert all(e["candidate"]["trace"] for e in report["episodes"])  # a stall keeps its trace like any failure
-    assert report["settings"]["failure"] == ["collision", "off_road", "stall"]
+    assert report.to_dict()["verdict"] == "FAIL" and report.to_dict()["regressed"] == [FREE_ROAD]
+    assert all(e["candidate"]["failure_kinds"] == ["stall"] for e in report.to_dict()["episodes"])
+    assert all(e["candidate"]["trace"] for e in report.to_dict()["episodes"])  # a stall keeps its trace like any failure
+    assert report.to_dict()["settings"]["failure"] == ["collision", "off_road", "stall"]
     # without stall among the failure kinds the stalls are still reported, but nothing fails
     lenient = run_regression(STOP, "rule", scenarios=[FREE_ROAD], episodes=2, workers=1, out_dir=tmp_path / "lenient",
                              env_config=CONFIG, progress=False, failure="collision,off_road")
-    candidate = lenient["scenarios"][FREE_ROAD]["candidate"]
+    candidate = lenient.to_dict()["scenarios"][FREE_ROAD]["candidate"]
     assert candidate["stall_rate"]["value"] == 1.0 and candidate["failure_rate"]["value"] == 0.0
 
 

@@ -65,7 +65,7 @@ def test_a_factory_spec_is_called_and_a_module_in_the_current_folder_is_found(tm
     # the workers find the module in this folder too
     report = run_regression("my_policies_here:make", "rule", scenarios=[SCENARIO], episodes=1, workers=1,
                             out_dir=tmp_path / "out", env_config=QUICK, stall_seconds=1, progress=False)
-    assert report["errors"] == [] and report["episodes"][0]["candidate"]["steps"] > 0
+    assert report.to_dict()["errors"] == [] and report.to_dict()["episodes"][0]["candidate"]["steps"] > 0
 
 
 @pytest.mark.slow
@@ -77,7 +77,7 @@ def test_resume_is_refused_when_the_policy_module_changed_under_the_same_spec(tm
                      progress=False)
     first = run_regression("resumed_policy_here:make", "rule", **arguments)
     again = run_regression("resumed_policy_here:make", "rule", **arguments)  # unchanged: resumes, runs nothing
-    assert again["episodes"] == first["episodes"]
+    assert again.to_dict()["episodes"] == first.to_dict()["episodes"]
     lines = (tmp_path / "out" / "results.jsonl").read_text().splitlines()
     assert len(lines) == 2
     module.write_text(POLICY_MODULE.format(action=4))  # same spec, other code
@@ -114,7 +114,7 @@ def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
                    str(tmp_path / "new"), "--stall-seconds", "1", "--no-progress")
     printed = capsys.readouterr().out
     assert code in (0, 3)
-    warning = f"baseline report {path} was made by dv2s-gym 0.0.1, this is {old['dv2s_version']}"
+    warning = f"baseline report {path} was made by dv2s-gym 0.0.1, this is {old.to_dict()['dv2s_version']}"
     assert f"warning: {warning}" in printed
     for name in ("report.md", "report.json", "junit.xml", "report.html"):  # every report carries it
         assert warning in (tmp_path / "new" / name).read_text().replace("&quot;", '"'), name

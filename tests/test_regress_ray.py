@@ -157,21 +157,21 @@ def test_run_regression_on_the_cluster_equals_the_local_run(ray_address, tmp_pat
     on_ray = run_regression("rule?action_noise=0.5", backend="ray", address=ray_address,
                             out_dir=tmp_path / "ray", **common)
     local = run_regression("rule?action_noise=0.5", backend="local", out_dir=tmp_path / "local", **common)
-    assert on_ray["settings"]["backend"] == "ray" and not on_ray["errors"]
+    assert on_ray.to_dict()["settings"]["backend"] == "ray" and not on_ray.to_dict()["errors"]
     assert not ray.is_initialized()  # the backend disconnected when the run ended
 
     def hashes(report):
         return {(e["id"], role): e[role]["trajectory_hash"] for e in report["episodes"] for role in ("candidate", "baseline")}
 
     assert hashes(on_ray) == hashes(local) and len(hashes(local)) == 12
-    assert on_ray["verdict"] == local["verdict"] and on_ray["newly_failing"] == local["newly_failing"]
-    assert on_ray["scenarios"] == local["scenarios"]
-    for episode in on_ray["episodes"]:  # traces of failed episodes came back into the run's folder
+    assert on_ray.to_dict()["verdict"] == local.to_dict()["verdict"] and on_ray.to_dict()["newly_failing"] == local.to_dict()["newly_failing"]
+    assert on_ray.to_dict()["scenarios"] == local.to_dict()["scenarios"]
+    for episode in on_ray.to_dict()["episodes"]:  # traces of failed episodes came back into the run's folder
         trace = episode["candidate"]["trace"]
         assert bool(trace) == episode["candidate"]["failed"]
         if trace:
             assert (tmp_path / "ray" / trace).read_bytes() == (tmp_path / "local" / trace).read_bytes()
-    assert on_ray["newly_failing"], "no failed episode: the trace transfer went untested"
+    assert on_ray.to_dict()["newly_failing"], "no failed episode: the trace transfer went untested"
 
 
 @pytest.mark.slow

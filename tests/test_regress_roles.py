@@ -12,8 +12,8 @@ COUNTING = "regress_helpers:EpisodeCountingPolicy?slow=1"
 def test_a_stateful_policy_against_itself_drives_alike_in_both_roles(tmp_path):
     report = run_regression(COUNTING, COUNTING, scenarios=["highway_lead_vehicle_brakes"], episodes=3, workers=1,
                             out_dir=tmp_path, env_config={"duration": 2}, stall_seconds=1, progress=False)
-    assert report["errors"] == []
-    for episode in report["episodes"]:  # each role's own instance has seen the same episodes before this one
+    assert report.to_dict()["errors"] == []
+    for episode in report.to_dict()["episodes"]:  # each role's own instance has seen the same episodes before this one
         assert episode["candidate"]["trajectory_hash"] == episode["baseline"]["trajectory_hash"], episode["id"]
 
 

@@ -214,8 +214,8 @@ def test_resume_of_a_finished_run_rewrites_its_card_and_one_stopped_before_its_f
     again = train(_tiny_config(out, "ppo", steps=64, hyperparameters={"n_steps": 64}), resume=True,
                   log=lines.append)
     assert any("nothing to train" in line for line in lines)
-    assert again["training"]["steps"] == first["training"]["steps"] == 64
-    assert [s["status"] for s in again["training"]["segments"]] == ["finished", "finished"]
+    assert again.to_dict()["training"]["steps"] == first.to_dict()["training"]["steps"] == 64
+    assert [s["status"] for s in again.to_dict()["training"]["segments"]] == ["finished", "finished"]
     assert read_card(out).training["steps"] == 64
     # a run folder with run.json but no checkpoint (interrupted while starting): --resume trains from step 0
     for path in (out / "checkpoints").iterdir():

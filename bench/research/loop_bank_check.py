@@ -44,7 +44,7 @@ def main() -> None:
     regress = RegressSettings(bank_dir=start["bank"], scenarios=start["scenarios"], episodes=args.episodes,
                               seed=args.seed, env_config=settings.get("env_config"))
     report = run_regression(candidate, settings["policy"], regress, workers=WorkerSettings(workers=args.workers),
-                            out_dir=args.out, progress=False)
+                            out_dir=args.out, progress=False).to_dict()
     print(report["verdict"], "-", report["overall"]["comparison"].get("reason"))
     print(f"{'scenario':45s} candidate baseline (failures of {args.episodes})")
     for name, row in report["scenarios"].items():

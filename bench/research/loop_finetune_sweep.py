@@ -122,7 +122,7 @@ def main() -> None:
                              env_config=env_config,
                              workers=WorkerSettings(workers=args.workers), progress=False)
     t_after = time.perf_counter() - began
-    summary = paired_summary(before, after, seed=settings["seed"])
+    summary = paired_summary(before, after, seed=settings["seed"]).to_dict()
     result = {"name": args.name, "args": vars(args), "before": summary["before"], "after": summary["after"],
               "drop": summary["relative_drop"], "drop_interval": summary["relative_drop_interval"],
               "mcnemar_p": summary["mcnemar_p"], "table": summary["table"], "types_before": failure_types(before),
@@ -134,7 +134,7 @@ def main() -> None:
         for role in ("control", "after"):
             records = [store.get(role, name, seed) for name, seed in episodes]
             if all(r is not None for r in records):
-                versus = paired_summary(records, after, seed=settings["seed"], bootstrap=0)
+                versus = paired_summary(records, after, seed=settings["seed"], bootstrap=0).to_dict()
                 result[f"vs_loop_{role}"] = {"loop_rate": versus["before"], "table": versus["table"],
                                              "mcnemar_p": versus["mcnemar_p"]}
     if args.method == "dagger":
@@ -151,7 +151,7 @@ def main() -> None:
         regress = RegressSettings(bank_dir=bank, scenarios=state["start"]["scenarios"], episodes=args.regress_episodes,
                                   seed=EVAL_SEED_BASE, margin=settings["margin"], env_config=env_config)
         report = run_regression(spec, policy, regress, workers=WorkerSettings(workers=args.workers),
-                                out_dir=out / "regress", progress=False)
+                                out_dir=out / "regress", progress=False).to_dict()
         overall = report["overall"]
         result["regress"] = {"verdict": report["verdict"], "new": overall["candidate"]["failure_rate"],
                              "old": overall["baseline"]["failure_rate"],

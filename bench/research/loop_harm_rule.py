@@ -53,7 +53,7 @@ def wilson(k: int, n: int, z: float = 1.96) -> Sequence[float]:
 def blocking_rate(rng: np.random.Generator, families: int, pairs: int, discordant: float, share: float,
                   both_fail: float, margin: float, trials: int) -> Dict[str, object]:
     """The share of ``trials`` simulated rounds in which ``family_harm`` names at least one harmed family."""
-    blocked = sum(bool(family_harm(draw_tables(rng, families, pairs, discordant, share, both_fail), margin)["harmed"])
+    blocked = sum(bool(family_harm(draw_tables(rng, families, pairs, discordant, share, both_fail), margin).harmed)
                   for _ in range(trials))
     low, high = wilson(blocked, trials)
     return {"families": families, "pairs_per_family": pairs, "discordant": discordant, "share": share,

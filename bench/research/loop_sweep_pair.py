@@ -19,7 +19,9 @@ import argparse
 import json
 from collections import Counter
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+from scenario_bank.records import HeldOutEpisode
 
 
 def loop_episodes(loop: Path) -> Tuple[List[Tuple[str, int]], str]:
@@ -32,7 +34,7 @@ def loop_episodes(loop: Path) -> Tuple[List[Tuple[str, int]], str]:
     return [(name, EVAL_SEED_BASE + i) for name in held for i in range(k)], state["start"]["bank"]
 
 
-def arm_records(loop: Path, arm: str, episodes: Sequence[Tuple[str, int]]) -> List[Optional[Dict[str, Any]]]:
+def arm_records(loop: Path, arm: str, episodes: Sequence[Tuple[str, int]]) -> List[Optional[HeldOutEpisode]]:
     """The records of ``arm`` (a sweep folder or ``loop:<role>``) on ``episodes``, ``None`` where one is missing."""
     from dv2s_gym.loop.heldout import HeldOutStore
 
@@ -53,11 +55,11 @@ def table_of(outcomes: Sequence[Tuple[bool, bool]]) -> Dict[str, Any]:
             "neither": table.neither, "mcnemar_p": mcnemar_exact(table) if outcomes else None}
 
 
-def failure_kind(record: Mapping[str, Any]) -> Optional[str]:
+def failure_kind(record: HeldOutEpisode) -> Optional[str]:
     """``stall``, ``collision`` or ``other`` (off road, low TTC) for a failed record; ``None`` when it passed."""
-    if not record.get("failed"):
+    if not record.failed:
         return None
-    kind = (record.get("failure") or {}).get("type")
+    kind = (record.failure or {}).get("type")
     return kind if kind in ("stall", "collision") else "other"
 
 
@@ -69,7 +71,7 @@ def pair_arms(loop: Path, a: str, b: str) -> Dict[str, Any]:
     episodes, bank = loop_episodes(loop)
     recs_a, recs_b = arm_records(loop, a, episodes), arm_records(loop, b, episodes)
     missing = errors = 0
-    pairs: List[Tuple[str, bool, bool, Mapping[str, Any], Mapping[str, Any]]] = []
+    pairs: List[Tuple[str, bool, bool, HeldOutEpisode, HeldOutEpisode]] = []
     for (name, _seed), ra, rb in zip(episodes, recs_a, recs_b):
         if ra is None or rb is None:
             missing += 1
@@ -85,8 +87,8 @@ def pair_arms(loop: Path, a: str, b: str) -> Dict[str, Any]:
         per_family[fam] = table_of([(fa, fb) for name, fa, fb, _, _ in pairs if family[name] == fam])
     return {"loop": str(loop), "a": a, "b": b, "episodes": len(episodes), "missing": missing, "errors": errors,
             **table_of([(fa, fb) for _, fa, fb, _, _ in pairs]),
-            "kinds_a": dict(Counter(failure_kind(ra) for *_, ra, _ in pairs if ra.get("failed"))),
-            "kinds_b": dict(Counter(failure_kind(rb) for *_, rb in pairs if rb.get("failed"))),
+            "kinds_a": dict(Counter(failure_kind(ra) for *_, ra, _ in pairs if ra.failed)),
+            "kinds_b": dict(Counter(failure_kind(rb) for *_, rb in pairs if rb.failed)),
             "per_family": per_family}
 
 

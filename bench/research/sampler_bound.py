@@ -35,9 +35,9 @@ def _episodes(records: List[EpisodeRecord]) -> List[Dict[str, Any]]:
     from dv2s_gym.mining.cluster import cluster_id, pair_of
 
     out = []
-    for r in sorted(records, key=lambda r: int(r["index"])):
-        failed = bool(r.get("failure")) and not r.get("error")
-        out.append({"index": int(r["index"]), "scenario": r["scenario"], "error": bool(r.get("error")),
+    for r in sorted(records, key=lambda r: int(r.index)):
+        failed = bool(r.failure) and not r.error
+        out.append({"index": int(r.index), "scenario": r.scenario, "error": bool(r.error),
                     "cluster": cluster_id(r) if failed else None, "pair": pair_of(r) if failed else None})
     return out
 

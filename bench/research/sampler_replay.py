@@ -32,14 +32,14 @@ from scenario_bank.records import EpisodeRecord
 def load(path: str) -> List[EpisodeRecord]:
     with open(path) as f:
         rows = [EpisodeRecord.from_dict(json.loads(line)) for line in f if line.strip()]
-    return [r for r in rows if not r.get("error")]
+    return [r for r in rows if not r.error]
 
 
 def simulate(records, budget: int, variant: str, explore: float, rng: np.random.Generator, window: int = 8,
              prior=(2.0, 1.0)) -> Dict[str, int]:
-    pools: Dict[str, List[Dict[str, Any]]] = defaultdict(list)
+    pools: Dict[str, List[EpisodeRecord]] = defaultdict(list)
     for r in records:
-        pools[r["scenario"]].append(r)
+        pools[r.scenario].append(r)
     names = sorted(pools)
     order = {s: list(rng.permutation(len(pools[s]))) for s in names}
     used = {s: 0 for s in names}
@@ -61,19 +61,19 @@ def simulate(records, budget: int, variant: str, explore: float, rng: np.random.
         r = pools[s][order[s][k]]
         used[s] += 1
         repeat_of_pool = used[s] > len(pools[s])
-        if r.get("failure") and not repeat_of_pool:
+        if r.failure and not repeat_of_pool:
             seen_clusters.add(cluster_id(r))
             seen_pairs.add(pair_of(r))
         pending.append((i, r, repeat_of_pool))
         if len(pending) > window:
             j, rec, rep = pending.pop(0)
-            if rec.get("failure") and not rep:
+            if rec.failure and not rep:
                 if variant == "bandit/state":
-                    st = rec.get("failure_state")
-                    if is_novel(st, archive[rec["scenario"]]):
+                    st = rec.failure_state
+                    if is_novel(st, archive[rec.scenario]):
                         new[j] += 1
                     if st is not None:
-                        archive[rec["scenario"]].append(st)
+                        archive[rec.scenario].append(st)
                 elif variant == "bandit/cluster":
                     c = cluster_id(rec)
                     if c not in fed_clusters:

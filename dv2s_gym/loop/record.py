@@ -52,8 +52,6 @@ class ErroredEpisodes(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "scenarios": "object", "messages": "object",
-                                        "examples": "object"}
     _WHAT: ClassVar[str] = "errored episodes"
 
 
@@ -62,14 +60,12 @@ class LoopStart(JsonRecord):
     """Where a loop started (``loop.json``'s ``start``): its working ``bank`` and the bank ``scenarios`` it mines and
     regression-tests, chosen once when the loop began."""
 
-    scenarios: Tuple[str, ...]
     bank: Optional[str] = None
+    scenarios: Tuple[str, ...] = field(kw_only=True)
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"bank": "str", "scenarios": "strings"}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("scenarios",)
-    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
     _WHAT: ClassVar[str] = "loop start"
 
 
@@ -90,8 +86,6 @@ class RecordedLoopSettings(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"policy": "str", "bank_dir": "str", "workers": "int", "holdout_by": "str",
-                                        "env_config": "object", "fine_tune_env_config": "object"}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("policy",)
     _WHAT: ClassVar[str] = "loop settings"
 
@@ -111,8 +105,6 @@ class PairedTable(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"both_fail": "int", "after_only": "int", "before_only": "int",
-                                        "neither": "int"}
     _WHAT: ClassVar[str] = "paired table"
 
 
@@ -139,13 +131,6 @@ class PairedSummary(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "pairs": "int", "errors": "int", "before": "object", "after": "object", "relative_drop": "number",
-        "relative_drop_interval": "list", "relative_drop_interval_unit": "str", "relative_drop_interval_units": "int",
-        "mcnemar_unit": "str", "pairs_per_family": "object", "table": "object", "mcnemar_p": "number",
-        "per_scenario": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"before": Rate, "after": Rate, "table": PairedTable}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("relative_drop_interval",)
     _WHAT: ClassVar[str] = "paired summary"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -172,14 +157,10 @@ class FamilyHarmRow(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "pairs": "int", "fine_tuned_only": "int", "other_only": "int", "difference": "number", "interval": "list",
-        "non_inferiority_p": "number", "holm_p": "number", "non_inferior": "bool", "harm": "bool"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("interval",)
     _WHAT: ClassVar[str] = "held-out family"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,14 +177,10 @@ class FamilyHarm(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"margin": "number", "rule": "str", "families": "object",
-                                        "harmed": "strings", "non_inferior": "strings"}
-    _ITEMS: ClassVar[Dict[str, type]] = {"families": FamilyHarmRow}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("harmed", "non_inferior")
     _WHAT: ClassVar[str] = "family harm"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,16 +205,10 @@ class HeldOutWorse(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "against": "str", "test": "str", "worse": "bool", "families": "int", "pairs": "int",
-        "fine_tuned_only": "int", "other_only": "int", "p_value": "number", "worse_families": "strings",
-        "reason": "str", "family_harm": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"family_harm": FamilyHarm}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("worse_families",)
     _WHAT: ClassVar[str] = "held-out test"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -250,12 +221,10 @@ class HeldOutTests(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"start": "object", "control": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"start": HeldOutWorse, "control": HeldOutWorse}
     _WHAT: ClassVar[str] = "held-out tests"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -283,16 +252,11 @@ class FinalVsStart(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "start": "str", "final": "str", "rounds": "list", "verdict": "str", "reason": "str", "episodes": "int",
-        "new_failure_rate": "object", "old_failure_rate": "object", "difference": "object", "p_value": "number",
-        "regressed": "strings", "report": "str", "error": "str"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("rounds", "regressed")
     _WHAT: ClassVar[str] = "cross-round check"
 
     def default_null_fields(self) -> FrozenSet[str]:
         # a check that ran writes every field; one that could not be made writes only its error
-        return frozenset() if self.error is not None else frozenset(self._KINDS) - {"error"}
+        return frozenset() if self.error is not None else self.json_fields() - {"error"}
 
     @classmethod
     def failed(cls, error: str) -> "FinalVsStart":
@@ -316,8 +280,6 @@ class MinedEntry(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"cluster": "str", "scenario": "str", "reproduction": "number",
-                                        "parent": "str", "replay": "bool", "not_narrowed": "object"}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("cluster", "scenario")
     _WHAT: ClassVar[str] = "mined entry"
 
@@ -352,14 +314,7 @@ class MiningSummary(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "episodes": "int", "errors": "int", "errored": "object", "failures": "int", "failures_against_policy": "int",
-        "clusters": "int", "conversions": "object", "replays": "object", "rejected_reasons": "list",
-        "rejected_reason_count": "int", "clusters_not_converted": "int", "clusters_not_kept": "int",
-        "clusters_reference_failed": "int", "kept": "list", "folder": "str"}
-    _NESTED: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
-    _ITEMS: ClassVar[Dict[str, type]] = {"kept": MinedEntry}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("rejected_reasons",)
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {"rejected_reasons": "list", "kept": "list"}
     _WHAT: ClassVar[str] = "mining step"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -399,12 +354,6 @@ class SplitRecord(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "by": "str", "fine_tune": "strings", "held_out": "strings", "fine_tune_clusters": "strings",
-        "held_out_clusters": "strings", "fine_tune_families": "strings", "held_out_families": "strings",
-        "groups": "int", "moved_to_fine_tune": "strings"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("fine_tune", "held_out", "fine_tune_clusters", "held_out_clusters",
-                                         "fine_tune_families", "held_out_families", "moved_to_fine_tune")
     _WHAT: ClassVar[str] = "split"
 
     @property
@@ -446,10 +395,6 @@ class ReferenceGate(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "reference": "str", "episodes": "int", "kept": "int", "excluded": "list", "failed": "int", "errored": "int",
-        "by_scenario": "object", "excluded_families": "strings"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("excluded", "excluded_families")
     _WHAT: ClassVar[str] = "reference gate"
 
     @property
@@ -469,8 +414,6 @@ class HeldOutBefore(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "done": "bool", "errored": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
     _WHAT: ClassVar[str] = "before step"
 
 
@@ -496,11 +439,7 @@ class FineTuneArm(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "model": "str", "method": "str", "scenarios": "int", "mined_upweighted": "int", "steps": "int",
-        "mined_left_out": "int", "families": "strings", "reward_weights": "object", "env_config": "object",
-        "reference": "any", "agreement": "any", "resumed": "list"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("families", "resumed")
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {"reference": "any"}
     _WHAT: ClassVar[str] = "fine-tuning arm"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -521,12 +460,10 @@ class RegressComparison(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"verdict": "str", "reason": "str", "episodes": "int",
-                                        "difference": "object", "p_value": "number", "report": "str"}
     _WHAT: ClassVar[str] = "untouched comparison"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -546,13 +483,7 @@ class UntouchedComparison(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"scenarios": "list", "seeds": "int", "policies": "object",
-                                        "fine_tuned_vs_start": "object", "control_vs_fine_tuned": "object",
-                                        "errored": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"fine_tuned_vs_start": RegressComparison,
-                                          "control_vs_fine_tuned": RegressComparison}
-    _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {"scenarios": "list"}
     _WHAT: ClassVar[str] = "untouched step"
 
     def failure_rate(self, role: str) -> Optional[float]:
@@ -592,12 +523,6 @@ class RegressSummary(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "verdict": "str", "reason": "str", "episodes": "int", "new_failure_rate": "object",
-        "old_failure_rate": "object", "difference": "object", "p_value": "number", "regressed": "list",
-        "report": "str", "held_out_parents": "object", "errored": "object"}
-    _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("regressed",)
     _WHAT: ClassVar[str] = "regress step"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -617,8 +542,6 @@ class ControlTable(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"both_fail": "int", "fine_tuned_only": "int", "control_only": "int",
-                                        "neither": "int"}
     _WHAT: ClassVar[str] = "control table"
 
 
@@ -638,10 +561,6 @@ class VersusControl(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"pairs": "int", "errors": "int", "relative_drop": "number",
-                                        "table": "object", "mcnemar_p": "number", "per_scenario": "object",
-                                        "underpowered": "str"}
-    _NESTED: ClassVar[Dict[str, type]] = {"table": ControlTable}
     _WHAT: ClassVar[str] = "comparison with the control"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -659,7 +578,6 @@ class ArmFailureTypes(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"start": "object", "fine_tuned": "object", "control": "object"}
     _WHAT: ClassVar[str] = "failures by type"
 
 
@@ -701,20 +619,6 @@ class HeldOutComparison(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "pairs": "int", "errors": "int", "before": "object", "after": "object", "relative_drop": "number",
-        "relative_drop_interval": "list", "relative_drop_interval_unit": "str", "relative_drop_interval_units": "int",
-        "mcnemar_unit": "str", "pairs_per_family": "object", "table": "object", "mcnemar_p": "number",
-        "per_scenario": "object", "min_episodes": "int", "heldout_scenarios": "int", "heldout_families": "int",
-        "sampled_families": "int", "min_families": "int", "failure_types": "object", "control": "object",
-        "vs_control": "object", "underpowered": "str", "margin": "number", "significantly_worse": "object",
-        "errored": "object",
-    }
-    _NESTED: ClassVar[Dict[str, type]] = {"before": Rate, "after": Rate, "control": Rate, "table": PairedTable,
-                                          "failure_types": ArmFailureTypes, "vs_control": VersusControl,
-                                          "significantly_worse": HeldOutTests}
-    _ITEMS: ClassVar[Dict[str, type]] = {"errored": ErroredEpisodes}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("relative_drop_interval",)
     _WHAT: ClassVar[str] = "held-out comparison"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -746,13 +650,6 @@ class RoundSteps(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"mine": "object", "split": "object", "skipped": "str", "reference": "object",
-                                        "before": "object", "fine_tune": "object", "control": "object",
-                                        "after": "object", "untouched": "object", "regress": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"mine": MiningSummary, "split": SplitRecord, "reference": ReferenceGate,
-                                          "before": HeldOutBefore, "fine_tune": FineTuneArm, "control": FineTuneArm,
-                                          "after": HeldOutComparison, "untouched": UntouchedComparison,
-                                          "regress": RegressSummary}
     _WHAT: ClassVar[str] = "steps"
 
     def done(self, step: str) -> bool:
@@ -781,11 +678,7 @@ class RoundRecord(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"round": "int", "steps": "object", "timings": "object", "policy": "str",
-                                        "new_policy": "str", "control_policy": "str", "next_policy": "str",
-                                        "next_policy_reason": "str", "final_vs_start": "object"}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("round",)
-    _NESTED: ClassVar[Dict[str, type]] = {"steps": RoundSteps, "final_vs_start": FinalVsStart}
     _WHAT: ClassVar[str] = "round"
 
     @classmethod

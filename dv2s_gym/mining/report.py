@@ -820,7 +820,7 @@ def _replay_lines(report: MineReport) -> List[str]:
     if not report.failures:
         return []
     example = next((f for f in report.failures if f.trace), None)
-    if not example:
+    if example is None:
         return []
     return ["", f"Replay a failure exactly from its trace: `dv2s replay {report.run_dir or '.'}/"
                 f"{example.trace} --video failure.webm`."]

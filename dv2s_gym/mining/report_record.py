@@ -68,14 +68,6 @@ class MineCounts(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "episodes": "int", "errors": "int", "worker_restarts": "int", "failures": "int", "failures_by_type": "object",
-        "avoidable": "int", "unavoidable": "int", "avoidability_unknown": "int", "clusters": "int",
-        "behaviours": "int", "scenario_failure_types": "int", "scenarios_failing": "int", "avoidable_clusters": "int",
-        "unavoidable_clusters": "int", "converted": "int", "kept": "int", "merged": "int", "rejected": "int",
-        "rejected_by_stage": "object", "conversion_seconds": "object", "conversion_stage_seconds": "object",
-        "parameters_compared": "int", "parameters_not_compared": "int",
-        "parameters_not_compared_by_reason": "object"}
     _WHAT: ClassVar[str] = "mining counts"
 
 
@@ -101,12 +93,6 @@ class SamplerSummary(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "episodes": "int", "errors": "int", "failures": "int", "avoidable_failures": "int",
-        "failures_per_100": "object", "avoidable_failures_per_100": "object", "clusters": "int",
-        "avoidable_clusters": "int", "clusters_per_100": "number", "avoidable_clusters_per_100": "number",
-        "episodes_to_first_failure": "int", "discovery": "list"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("discovery",)
     _WHAT: ClassVar[str] = "sampler summary"
 
 
@@ -135,14 +121,10 @@ class ScenarioSummary(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "episodes": "int", "errors": "int", "failures": "int", "avoidable": "int", "unavoidable": "int",
-        "unknown": "int", "failure_rate": "object", "estimated_rate": "object", "failures_by_type": "object",
-        "failure_types": "int", "clusters": "int", "avoidable_clusters": "int", "converted": "int", "kept": "int"}
     _WHAT: ClassVar[str] = "scenario summary"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 def _behaviour(data: Mapping[str, Any]) -> Dict[str, Any]:
@@ -194,16 +176,12 @@ class FailureEntry(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "index": "int", "sampler": "str", "scenario": "str", "family": "str", "seed": "int", "params": "object",
-        "type": "str", "kind": "str", "time": "number", "with": "any", "with_kind": "str", "collision_type": "str",
-        "min_ttc": "number", "rho": "number", "avoidable": "bool", "reference": "object", "cluster": "str",
-        "behaviour": "object", "trace": "str"}
     _ATTRIBUTES: ClassVar[Dict[str, str]] = {"with": "with_actor"}
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {"behaviour": "object"}
     _WHAT: ClassVar[str] = "failure entry"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
     @classmethod
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
@@ -280,20 +258,11 @@ class ClusterEntry(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "id": "str", "scenario": "str", "family": "str", "scenarios": "strings", "type": "str", "kind": "str",
-        "region": "str", "behaviour": "object", "size": "int", "avoidable": "int", "unavoidable": "int",
-        "unknown": "int", "samplers": "object", "first_index": "int", "params": "object",
-        "collision_types": "object", "with_kinds": "object", "representative": "object", "video": "str",
-        "converted_video": "str", "status": "str", "reason": "str", "bank_entry": "str", "merged_into": "str",
-        "replay_entry": "str", "replay_not_narrowed": "object", "reproduction": "any", "reproduction_rate": "number",
-        "e2e_sc": "number", "description": "str", "script": "str", "conversion": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"representative": FailureEntry, "conversion": ConversionRecord}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {"behaviour": "object"}
     _WHAT: ClassVar[str] = "cluster entry"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
     @classmethod
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
@@ -316,13 +285,10 @@ class RejectedConversion(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"cluster": "str", "index": "int", "stage": "str", "reason": "str",
-                                        "rejections": "strings"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("rejections",)
     _WHAT: ClassVar[str] = "rejected conversion"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -338,12 +304,10 @@ class EpisodeError(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"index": "int", "sampler": "str", "scenario": "str", "seed": "int",
-                                        "error": "str"}
     _WHAT: ClassVar[str] = "episode error"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -358,12 +322,10 @@ class WorkerRestart(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"index": "int", "scenario": "str", "seed": "int", "problems": "strings"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("problems",)
     _WHAT: ClassVar[str] = "worker restart"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -398,22 +360,12 @@ class MineReport(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "schema": "str", "schema_version": "int", "created": "str", "dv2s_version": "any", "run_dir": "str",
-        "settings": "object", "counts": "object", "samplers": "object", "scenarios": "object",
-        "failure_rate": "object", "clusters": "objects", "unavoidable_clusters": "objects", "failures": "objects",
-        "unavoidable": "objects", "rejected": "objects", "errors": "objects", "worker_restarts": "objects",
-        "skipped_lines": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"counts": MineCounts}
-    _ITEMS: ClassVar[Dict[str, type]] = {
-        "samplers": SamplerSummary, "scenarios": ScenarioSummary, "clusters": ClusterEntry,
-        "unavoidable_clusters": ClusterEntry, "failures": FailureEntry, "unavoidable": FailureEntry,
-        "rejected": RejectedConversion, "errors": EpisodeError, "worker_restarts": WorkerRestart}
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {"dv2s_version": "any"}
     _WHAT: ClassVar[str] = "mining report"
 
     def default_null_fields(self) -> FrozenSet[str]:
         # every field of report.json is always written
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
     @property
     def policy(self) -> str:

@@ -66,8 +66,6 @@ class BankInfo(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"path": "str", "version": "any", "scenarios": "strings", "hashes": "object"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
     _WHAT: ClassVar[str] = "report bank"
 
 
@@ -84,8 +82,6 @@ class ScenarioPlan(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"baseline_rate": "number", "source": "str", "discordance": "number",
-                                        "episodes": "int"}
     _WHAT: ClassVar[str] = "scenario plan"
 
 
@@ -108,10 +104,6 @@ class PowerPlan(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "mde": "number", "power": "number", "level": "number",
-                                        "per_scenario": "object", "assumption": "str", "planned": "int",
-                                        "note": "str"}
-    _ITEMS: ClassVar[Dict[str, type]] = {"per_scenario": ScenarioPlan}
     _WHAT: ClassVar[str] = "power plan"
 
 
@@ -131,12 +123,10 @@ class PowerEstimate(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"n": "int", "baseline_rate": "number", "level": "number",
-                                        "at_margin": "number", "at_mde": "number", "detectable": "number"}
     _WHAT: ClassVar[str] = "power estimate"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,11 +143,7 @@ class RunPower(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"per_scenario": "object", "pooled": "object", "power": "number",
-                                        "mde": "number", "assumption": "str"}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("per_scenario", "pooled", "power", "assumption")
-    _NESTED: ClassVar[Dict[str, type]] = {"pooled": PowerEstimate}
-    _ITEMS: ClassVar[Dict[str, type]] = {"per_scenario": PowerEstimate}
     _WHAT: ClassVar[str] = "run power"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -190,13 +176,6 @@ class ReportSettings(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "episodes": "int", "seed": "int", "margin": "number", "alpha": "number", "sequential": "bool",
-        "env_config": "object", "backend": "str", "workers": "int", "timeout": "number", "failure": "strings",
-        "stall_seconds": "number", "batch": "int", "plan": "object", "mde": "number", "power": "number",
-    }
-    _NESTED: ClassVar[Dict[str, type]] = {"plan": PowerPlan}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("failure",)
     _WHAT: ClassVar[str] = "report settings"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -217,9 +196,6 @@ class PolicyInfo(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"report": "str", "role": "str", "spec": "str", "card": "object",
-                                        "warning": "str"}
-    _NESTED: ClassVar[Dict[str, type]] = {"card": ModelCard}
     _WHAT: ClassVar[str] = "report policy"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -263,8 +239,7 @@ class PairedEpisode(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"id": "str", "scenario": "str", "seed": "int", "candidate": "object",
-                                        "baseline": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {}  # the results are read by _check_extra, as_result
     _WHAT: ClassVar[str] = "paired episode"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -307,9 +282,8 @@ class Summary(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "errors": "int", "min_ttc": "object",
-                                        "mean_speed": "object", "return": "object"}
     _ATTRIBUTES: ClassVar[Dict[str, str]] = {"return": "episode_return"}
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {"rates": None}  # the rates are keys of their own
     _WHAT: ClassVar[str] = "summary"
 
     @classmethod
@@ -318,7 +292,7 @@ class Summary(ReportRecord):
         if record is data:
             return record
         data = data.to_dict() if isinstance(data, JsonRecord) else data
-        rates = {key: value for key, value in data.items() if key.endswith("_rate") and key not in cls._KINDS}
+        rates = {key: value for key, value in data.items() if key.endswith("_rate") and key not in cls.json_fields()}
         for key, value in rates.items():
             if not isinstance(value, Mapping):
                 raise RecordError(f"summary field {key!r} must be a JSON object, not {type(value).__name__}")
@@ -362,14 +336,10 @@ class PairedComparison(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "n": "int", "table": "object", "candidate_rate": "number", "baseline_rate": "number", "difference": "object",
-        "p_value": "number", "p_adjusted": "number", "verdict": "str", "reason": "str",
-    }
     _WHAT: ClassVar[str] = "comparison"
 
     def default_null_fields(self) -> FrozenSet[str]:
-        return frozenset(self._KINDS)
+        return self.json_fields()
 
 
 @dataclass(frozen=True, eq=False)
@@ -383,8 +353,6 @@ class ScenarioResult(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"candidate": "object", "baseline": "object", "comparison": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"candidate": Summary, "baseline": Summary, "comparison": PairedComparison}
     _WHAT: ClassVar[str] = "scenario result"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -410,7 +378,6 @@ class EpisodeError(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"id": "str", "role": "str", "error": "any"}
     _WHAT: ClassVar[str] = "episode error"
 
     @property
@@ -439,8 +406,6 @@ class SequentialOutcome(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"looks": "int", "episodes": "int", "max_episodes": "int", "batch": "int",
-                                        "spending": "any", "verdict": "str"}
     _WHAT: ClassVar[str] = "sequential test"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -482,20 +447,6 @@ class RegressReport(ReportRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "schema": "str", "schema_version": "int", "created": "str", "dv2s_version": "str", "bank": "object",
-        "settings": "object", "candidate": "object", "baseline": "object", "episodes": "objects",
-        "scenarios": "object", "overall": "object", "verdict": "str", "regressed": "strings",
-        "newly_failing": "strings", "errors": "objects", "stopped_early": "bool", "sequential": "object",
-        "power": "object", "aggregates": "object", "error_reason": "str", "hostname": "str", "timing": "object",
-        "duration": "number",
-    }
-    _NESTED: ClassVar[Dict[str, type]] = {"bank": BankInfo, "settings": ReportSettings, "candidate": PolicyInfo,
-                                          "baseline": PolicyInfo, "overall": ScenarioResult,
-                                          "sequential": SequentialOutcome, "power": RunPower}
-    _ITEMS: ClassVar[Dict[str, type]] = {"episodes": PairedEpisode, "errors": EpisodeError,
-                                         "scenarios": ScenarioResult}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("regressed", "newly_failing")
     _WHAT: ClassVar[str] = "regression report"
 
     def default_null_fields(self) -> FrozenSet[str]:

@@ -108,7 +108,7 @@ def _from_trace(path: str, frames: Optional[List[Any]]):
 
 
 def _from_policy(report: RegressReport, result: RegressEpisode, spec: str, frames: Optional[List[Any]]):
-    config = check_file_config(report.settings.env_config if report.settings else None, "the report")
+    config = check_file_config(report.settings.env_config if report.settings is not None else None, "the report")
     bank = report.bank if recorded(report.bank) else BankInfo()
     scenario = result.scenario
     bank_dir = bank_for_scenario(bank, scenario)

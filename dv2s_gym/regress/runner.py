@@ -56,7 +56,7 @@ from scenario_bank.bank import Bank
 from scenario_bank.jail import JailUnavailableError, require_jail
 from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
-from scenario_bank.records import RecordError, RegressEpisode
+from scenario_bank.records import JsonRecord, RecordError, RegressEpisode, recorded
 from scenario_bank.run_identity import BANK_IDENTITY
 from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, PowerPlan, RegressReport, SequentialOutcome
 from policies.card_record import ModelCard
@@ -98,7 +98,8 @@ def _policy_info(spec: str, env_config: Optional[Dict[str, Any]] = None) -> Poli
         raise RegressError(f"--config: {error}") from None
     card = None
     while policy is not None and card is None:
-        card = getattr(policy, "card", None) or None
+        found = getattr(policy, "card", None)  # an empty card (a policy loaded without one) is no card
+        card = (found if recorded(found) else None) if isinstance(found, JsonRecord) else (found or None)
         policy = getattr(policy, "inner", None)
     return PolicyInfo(spec=spec, card=ModelCard.from_dict(card) if card is not None else None)
 

@@ -28,10 +28,9 @@ from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tu
 
 from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend, OnResult, default_workers
 from dv2s_gym.workers.errors import WorkerError
-from dv2s_gym.workers.tasks import (TaskFunction, function_for, gave_up_result, run_task, start_plugins,
-                                    task_modules, worker_plugins)
+from dv2s_gym.workers.tasks import (TaskFunction, function_for, gave_up_result, result_object, run_task,
+                                    start_plugins, task_modules, worker_plugins)
 import policies.evaluation
-from scenario_bank.records import JsonRecord
 
 __all__ = ["Backend", "LocalBackend", "default_workers", "DEFAULT_TIMEOUT"]
 
@@ -299,8 +298,7 @@ class LocalBackend(Backend):
                 raise WorkerError(message[1])  # every worker would fail alike: the run stops, naming the module
             _, result = message
             if worker.busy[0] in failures:  # finished on a retry: say what happened before
-                plain = result.to_dict() if isinstance(result, JsonRecord) else result
-                result = dict(plain, worker_restarts=list(failures[worker.busy[0]]))
+                result = dict(result_object(result), worker_restarts=list(failures[worker.busy[0]]))
             worker.busy = None
             return None, result
         if worker.process.sentinel in ready:

@@ -32,7 +32,8 @@ import ray.exceptions
 
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend
-from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task, start_plugins, worker_plugins
+from dv2s_gym.workers.tasks import (TaskFunction, function_for, gave_up_result, result_object, run_task, start_plugins,
+                                     worker_plugins)
 from scenario_bank.atomic import atomic_write_bytes
 
 __all__ = ["RayBackend", "RayUnavailableError", "CONNECT_TIMEOUT"]
@@ -77,8 +78,9 @@ class EpisodeActor:
             local["trace_dir"] = str(self.scratch)
         result = run_task(function, local)
         data = None
-        if result.get("trace"):
-            path = Path(result["trace"])
+        trace = result_object(result).get("trace")
+        if trace:
+            path = Path(trace)
             data = path.read_bytes()
             path.unlink()
         return result, data
@@ -271,10 +273,11 @@ class RayBackend(Backend):
     @staticmethod
     def _deliver(task: Dict[str, Any], result: Dict[str, Any], trace: Optional[bytes]) -> Dict[str, Any]:
         if trace is not None and task.get("trace_dir"):
-            path = Path(task["trace_dir"]) / Path(result["trace"]).name
+            plain = result_object(result)
+            path = Path(task["trace_dir"]) / Path(plain["trace"]).name
             path.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_bytes(path, trace)
-            result = dict(result, trace=str(path))
+            result = dict(plain, trace=str(path))
         return result
 
     def close(self) -> None:

@@ -20,12 +20,13 @@ from dv2s_gym.workers.errors import WorkerError
 from scenario_bank.errors import BuiltInReplacedWarning
 from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import PluginError, check_plugins, import_plugins
+from scenario_bank.records import JsonRecord
 
 if "numpy" not in sys.modules:  # a fresh worker process (e.g. Ray's): one BLAS/OpenMP thread per worker
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 __all__ = ["TaskFunction", "register", "function_for", "task_modules", "worker_plugins", "start_plugins", "run_task",
-           "task_id", "error_result", "gave_up_result"]
+           "result_object", "task_id", "error_result", "gave_up_result"]
 
 TaskFunction = Callable[[Dict[str, Any]], Dict[str, Any]]
 """Runs one task in a worker process and returns its result (a JSON-able dict)."""
@@ -106,6 +107,12 @@ def run_task(function: TaskFunction, task: Dict[str, Any]) -> Dict[str, Any]:
         return function(task)
     except BaseException as error:
         return error_result(task, f"{type(error).__name__}: {error}")
+
+
+def result_object(result: Any) -> Dict[str, Any]:
+    """A task's result as its JSON object: a record's :meth:`~scenario_bank.records.JsonRecord.to_dict`, an error
+    result (a dict) as it is."""
+    return result.to_dict() if isinstance(result, JsonRecord) else result
 
 
 def task_id(scenario: str, seed: int) -> str:

@@ -122,9 +122,8 @@ class FailureInteraction(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {"failure_type": "any", "actor": "any", "kind": "any", "manoeuvres": "list",
-                                        "gap_m": "number", "side": "str"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("manoeuvres",)
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {"failure_type": "any", "actor": "any", "kind": "any",
+                                                               "manoeuvres": "list"}
     _WHAT: ClassVar[str] = "interaction"
 
     def default_null_fields(self) -> FrozenSet[str]:

@@ -77,14 +77,6 @@ class ConversionRecord(JsonRecord):
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
-    _KINDS: ClassVar[Dict[str, str]] = {
-        "cluster": "str", "index": "int", "status": "str", "reason": "str", "stage": "str", "video": "str",
-        "description": "str", "script": "str", "reproduction": "object", "e2e_sc": "number", "bank_entry": "str",
-        "merged_into": "str", "merge_reason": "str", "seconds": "number", "timings": "object",
-        "interaction": "object", "replay_entry": "str", "replay_not_narrowed": "object", "avoidability": "object",
-        "rejections": "strings", "actors": "object", "parameters": "object", "converted_video": "str",
-        "recovered_from_bank": "bool"}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("rejections",)
     _WHAT: ClassVar[str] = "conversion record"
 
     def default_null_fields(self) -> FrozenSet[str]:

@@ -1,7 +1,7 @@
 """How often the policy fails under each scenario's own parameter distribution, from a mining run.
 
 A mining run does not draw scenes the way they occur: an adaptive sampler draws more where failures
-were found. Each episode record keeps the density its scene was drawn with (``record["proposal"]``:
+were found. Each episode record keeps the density its scene was drawn with (``record.proposal``:
 ``scenario``, the probability of its scenario; ``params``, the density of its parameters in the
 scenario's unit box; ``floor``, the smallest share the sampler gave any scenario or parameter bucket
 at that draw, relative to uniform; see :func:`dv2s_gym.mining.sampling.samplers.proposal_density`). A scenario's
