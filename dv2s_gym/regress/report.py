@@ -100,6 +100,7 @@ from dv2s_gym.regress.aggregates import return_aggregates
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
 from dv2s_gym.regress.failures import failure_kinds, result_value
 from policies.run_identity import BUILT_IN, installed_version, report_code_identity
+from policies.stats import Rate
 from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, PairedEpisode, PolicyInfo,
                                       RegressReport, ReportSettings, RunPower, ScenarioResult, SequentialOutcome,
@@ -174,11 +175,7 @@ def _ok(results: Sequence[RegressEpisode]) -> List[RegressEpisode]:
 
 
 def _rate(values: Sequence[bool]) -> Dict[str, Any]:
-    n, k = len(values), int(sum(bool(v) for v in values))
-    if n == 0:
-        return {"value": None, "low": None, "high": None, "count": 0}
-    low, high = stats.wilson_interval(k, n, CONFIDENCE)
-    return {"value": k / n, "low": low, "high": high, "count": k}
+    return Rate.of(sum(bool(v) for v in values), len(values), CONFIDENCE).report_json()
 
 
 def _mean(groups: Sequence[Sequence[float]]) -> Dict[str, Any]:
