@@ -75,9 +75,15 @@ class Registry(MutableMapping[str, V]):
             self.register(name, value)
         self.mark_built_in()
 
-    def mark_built_in(self) -> None:
+    def mark_built_in(self, *names: str) -> None:
         """Every entry held now is one of the product's own (a module that registers its entries by calls
-        marks them once it has); none of them counts as replaced."""
+        marks them once it has); none of them counts as replaced. With ``names``: those entries only (a
+        registry that product modules fill one entry each, as they are imported)."""
+        if names:
+            self._built_in.update(name for name in names if name in self._entries)
+            for name in names:
+                self._replaced.pop(name, None)
+            return
         self._built_in = set(self._entries)
         self._replaced = {}
 

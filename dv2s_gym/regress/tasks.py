@@ -43,7 +43,7 @@ import traceback
 from pathlib import Path
 from typing import Any, Dict
 
-from dv2s_gym.workers.tasks import error_result, register, task_id
+from dv2s_gym.workers.tasks import error_result, mark_built_in, register, task_id
 from policies import worker_cache
 from scenario_bank.records import RegressEpisode
 from dv2s_gym.regress.failures import apply_failure, failure_kinds, parse_failure
@@ -106,3 +106,4 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
 
 
 register(KIND, run_regress_task)
+mark_built_in(KIND)
