@@ -120,10 +120,10 @@ def module_not_found(module: str, error: BaseException) -> bool:
 
 def import_raised(module: str, error: BaseException, where: str = "this process") -> str:
     """The words for a module that was found but whose own code raised ``error`` while it was imported in
-    ``where`` (``"a worker process"``: the advice says to import it as a worker does, since it may import in the
+    ``where`` (a worker process, ``"a worker process"``: the advice says to import it as a worker does, since it may import in the
     process that started the workers and fail only there)."""
     reason = " ".join(f"{type(error).__name__}: {error}".split())
-    how = "" if where == "this process" else (
+    how = "" if "worker" not in where else (
         f"as {where} does (its working folder, environment and Python path: a module may import here and fail "
         "only there) ")
     return f"importing it raised {reason}; run `python -c 'import {module}'` {how}to see the traceback"
