@@ -53,7 +53,8 @@ from scenario_bank.run_paths import resume_fix
 
 __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "check_policy_unchanged",
            "checkpoint_path", "installed_version", "MAX_HELPER_FILES", "CODE_IDENTITY", "dv2s_sources_sha256",
-           "code_identity", "check_code_unchanged", "module_fingerprint"]
+           "code_identity", "check_code_unchanged", "module_fingerprint", "detector_identity",
+           "report_code_identity", "BUILT_IN"]
 
 MAX_HELPER_FILES = 500
 """At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
@@ -316,3 +317,36 @@ def check_code_unchanged(recorded: Mapping[str, Any], *, run: str, error: type,
         raise error(f"{run} made with other code ({', '.join(parts)} differ: {shown}); restore the code the run "
                     "used (dv2s's sources, the plug-in modules DV2S_PLUGINS names), or start a new --out folder")
     return current
+
+
+# --------------------------------------------------------------------------- who judges a failure kind
+BUILT_IN = "dv2s-gym's own"
+"""How :func:`detector_identity` names the product's own failure type or detector."""
+
+
+def _source_sha256(module: str) -> str:
+    found = _module_file(module)
+    return file_sha256(found) if found is not None else "not found"
+
+
+def detector_identity(kinds: Iterable[str]) -> Dict[str, Dict[str, Any]]:
+    """Who decides each failure kind of ``kinds`` in this process (the detector part of :func:`code_identity`):
+    ``{kind: {"failure type": module, "detector": module, "sources (SHA-256)": {module: SHA-256 of its source}}}``,
+    a module being the plug-in module that registered the type or its detector, or :data:`BUILT_IN`."""
+    table = plugin_table()
+    found: Dict[str, Dict[str, Any]] = {}
+    for kind in kinds:
+        modules = {"failure type": table["failure types"].get(kind) or BUILT_IN,
+                   "detector": table["detectors"].get(kind) or BUILT_IN}
+        found[kind] = {**modules, "sources (SHA-256)": {module: _source_sha256(module) for module in
+                                                         sorted(set(modules.values()) - {BUILT_IN})}}
+    return found
+
+
+def report_code_identity(kinds: Iterable[str]) -> Dict[str, Any]:
+    """The code a report's episodes were judged by, for a report to record: ``"dv2s sources (SHA-256)"``, the
+    ``"plug-in modules"`` loaded (module -> SHA-256 of its source), the ``"detectors"`` of the failure ``kinds``
+    judged (:func:`detector_identity`) and the ``"replaced built-ins"``."""
+    return {"dv2s sources (SHA-256)": dv2s_sources_sha256(),
+            "plug-in modules": {module: _source_sha256(module) for module in code_modules()},
+            "detectors": detector_identity(kinds), "replaced built-ins": replaced_built_ins()}

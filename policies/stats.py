@@ -113,6 +113,17 @@ class Rate(JsonRecord):
         low, high = wilson_interval(int(k), int(n), confidence)
         return cls(k=int(k), n=int(n), rate=(k / n) if n else None, low=low, high=high)
 
+    def report_json(self, scale: float = 1.0, with_n: bool = False) -> Dict[str, Any]:
+        """The rate as the mining and regression reports write it: ``{"value", "low", "high", "count"}`` (and
+        ``"n"`` with ``with_n``), the value and its bounds times ``scale`` (``100.0``: per 100 episodes); ``null``
+        value and bounds without an episode."""
+        count, n = int(self.k or 0), int(self.n or 0)
+        if n == 0:
+            data: Dict[str, Any] = {"value": None, "low": None, "high": None, "count": count}
+        else:
+            data = {"value": scale * count / n, "low": scale * self.low, "high": scale * self.high, "count": count}
+        return {**data, "n": n} if with_n else data
+
     def text(self, digits: int = 2, counts: bool = True) -> str:
         """The rate as ``k/n = rate [low, high]`` (without ``counts``: ``rate [low, high]``), ``digits`` decimals;
         ``-`` without a rate."""

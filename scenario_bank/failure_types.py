@@ -13,13 +13,15 @@ and its reports list them in severity order (:func:`failure_table`: the table an
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Tuple
 
 from scenario_bank.errors import DV2SError
 from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import forget_plugin, remember_plugin
+from scenario_bank.records import RegressEpisode
 
 __all__ = ["FailureTypeError", "UnknownDetectorError", "FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table",
            "failure_type", "severity_order",
@@ -72,6 +74,9 @@ _REGISTERED: Registry[FailureType] = Registry(
 """Rows added at run time (:func:`register_failure_type`), by name, with the module that registered each."""
 _TABLE: Tuple[FailureType, ...] = FAILURE_TABLE
 _BY_NAME: Dict[str, FailureType] = {row.name: row for row in FAILURE_TABLE}
+_BUILT_IN: Dict[str, FailureType] = dict(_BY_NAME)
+_RESULT_FIELDS = frozenset(field.name for field in dataclasses.fields(RegressEpisode))
+"""What a regression result records itself: no failure type's ``result_field`` may be one of them."""
 
 
 def failure_table() -> Tuple[FailureType, ...]:
@@ -115,11 +120,29 @@ def register_failure_type(row: FailureType, module: Optional[str] = None, overwr
                          "most severe, the table's collision; a plug-in's type takes a number after the table's)")
     if any(other.severity == row.severity for other in _TABLE if other.name != row.name):
         raise FailureTypeError(f"failure type {row.name!r}: severity {row.severity} is taken; choose one no type has")
+    _check_result_field(row)
     module = module or _caller_module()
     _REGISTERED.register(row.name, row, overwrite=overwrite, module=module)
     remember_plugin(_plugin_name(row.name), module)
     _rebuild()
     return row
+
+
+def _check_result_field(row: FailureType) -> None:
+    """Refuse a ``result_field`` the regression result already has (a measure such as ``success``, or another
+    type's field): the worker writes the type's detection into it, which would overwrite that fact."""
+    if not row.result_field:
+        return
+    taken = {other.result_field: other.name for other in _TABLE if other.result_field and other.name != row.name}
+    if row.result_field in taken:
+        owner = f"the field of failure type {taken[row.result_field]!r}"
+    elif row.result_field in _RESULT_FIELDS:
+        owner = "a field the regression result records itself"
+    else:
+        return
+    raise FailureTypeError(f"failure type {row.name!r}: result_field {row.result_field!r} is {owner}; give the "
+                           f"type a field of its own (e.g. {row.name + '_seen'!r}), which the regression worker "
+                           "fills from its detector")
 
 
 def _plugin_name(name: str) -> str:
@@ -175,15 +198,24 @@ def plugin_table() -> Dict[str, Dict[str, Optional[str]]]:
     return {"failure types": types, "detectors": detectors}
 
 
-def happened(name: str, result: Any, trace: Any, settings: Any) -> bool:
-    """Whether the registered failure type ``name`` happened in the episode (``result``, ``trace``), by its
-    detector with the monitor ``settings`` (an :class:`envs.safety_metrics.MonitorSettings`).
+def happened(name: str, result: Any, trace: Any, settings: Any,
+             recorded: Optional[Mapping[str, Any]] = None) -> bool:
+    """Whether the failure type ``name`` happened in the episode (``result``, ``trace``), decided as every command
+    decides it: by the detector registered for it at run time (a plug-in's type, or a plug-in's detector replacing
+    a built-in one) with the monitor ``settings`` (an :class:`envs.safety_metrics.MonitorSettings`); a type of
+    :data:`FAILURE_TABLE` whose built-in detector stands is decided by the fact the episode's record holds for it
+    (``recorded[row.result_field]``: the result's ``collided`` and ``off_road``, which the built-in collision and
+    off-road detectors read, and the worker's ``stalled``, :mod:`dv2s_gym.regress.failures`).
 
     Raises:
         UnknownDetectorError: (a ``KeyError``) when no detector is registered for ``name`` in this process (a plug-in module registers its
             type and detector when it is imported, and every worker process imports it).
     """
     detection = _DETECTION.get(name)
+    row = _BUILT_IN.get(name)
+    if detection is None and row is not None and row.result_field and recorded is not None \
+            and row.result_field in recorded:
+        return bool(recorded[row.result_field])
     if detection is None:
         raise UnknownDetectorError(f"failure type {name!r} has no detector registered in this process; its plug-in module "
                        "must register the type and its detector (dv2s_gym.mining.monitors.register_detector) "

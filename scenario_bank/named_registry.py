@@ -14,7 +14,7 @@ from scenario_bank.errors import BuiltInReplacedWarning
 from typing import (Callable, Dict, Iterator, List, Mapping, MutableMapping, Optional, Sequence, Type, TypeVar,
                     Union, overload)
 
-__all__ = ["Registry", "replaced_built_ins"]
+__all__ = ["Registry", "replaced_built_ins", "replaced_text"]
 
 V = TypeVar("V")
 D = TypeVar("D")
@@ -35,6 +35,17 @@ def replaced_built_ins() -> List[str]:
             how = "removed" if module == _REMOVED else f"replaced by {module}" if module else "replaced"
             found.add(f"{registry.what} {name!r} ({how})")
     return sorted(found)
+
+
+def replaced_text(replaced: Sequence[str]) -> str:
+    """The sentence a report's banner and a command's summary add when plug-ins replaced built-in entries (a
+    detector, the reference driver; :func:`replaced_built_ins`), so that the counts read as the plug-ins'; ``""``
+    when none was."""
+    if not replaced:
+        return ""
+    several = len(replaced) > 1
+    return (f"Built-in{'s' if several else ''} replaced by plug-ins: {', '.join(replaced)}; what this run counts "
+            f"under {'those names' if several else 'that name'} is the plug-ins'")
 
 
 _REMOVED = "<removed>"
@@ -64,9 +75,15 @@ class Registry(MutableMapping[str, V]):
             self.register(name, value)
         self.mark_built_in()
 
-    def mark_built_in(self) -> None:
+    def mark_built_in(self, *names: str) -> None:
         """Every entry held now is one of the product's own (a module that registers its entries by calls
-        marks them once it has); none of them counts as replaced."""
+        marks them once it has); none of them counts as replaced. With ``names``: those entries only (a
+        registry that product modules fill one entry each, as they are imported)."""
+        if names:
+            self._built_in.update(name for name in names if name in self._entries)
+            for name in names:
+                self._replaced.pop(name, None)
+            return
         self._built_in = set(self._entries)
         self._replaced = {}
 

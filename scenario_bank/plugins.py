@@ -118,10 +118,15 @@ def module_not_found(module: str, error: BaseException) -> bool:
     return bool(missing) and (module == missing or module.startswith(f"{missing}."))
 
 
-def import_raised(module: str, error: BaseException) -> str:
-    """The words for a module that was found but whose own code raised ``error`` while it was imported."""
+def import_raised(module: str, error: BaseException, where: str = "this process") -> str:
+    """The words for a module that was found but whose own code raised ``error`` while it was imported in
+    ``where`` (a worker process, ``"a worker process"``: the advice says to import it as a worker does, since it may import in the
+    process that started the workers and fail only there)."""
     reason = " ".join(f"{type(error).__name__}: {error}".split())
-    return f"importing it raised {reason}; run `python -c 'import {module}'` to see the traceback"
+    how = "" if "worker" not in where else (
+        f"as {where} does (its working folder, environment and Python path: a module may import here and fail "
+        "only there) ")
+    return f"importing it raised {reason}; run `python -c 'import {module}'` {how}to see the traceback"
 
 
 def missing_attribute(module: object, attribute: str) -> str:
@@ -151,7 +156,7 @@ def import_plugins(modules: Iterable[str], where: str = "this process") -> None:
                 raise
             if not module_not_found(module, error):
                 raise PluginError(f"plug-in module {module!r} cannot be imported in {where}: "
-                                  f"{import_raised(module, error)}") from None
+                                  f"{import_raised(module, error, where)}") from None
             reason = " ".join(f"{type(error).__name__}: {error}".split())
             raise PluginError(f"plug-in module {module!r} cannot be imported in {where} ({reason}); it must be "
                               "importable there: on the Python path of every worker (the same path on every "

@@ -188,7 +188,7 @@ def test_a_run_against_a_baseline_report_repeats_its_seed_and_env_config_unless_
     from dv2s_gym.regress.report import baseline_defaults
 
     path = tmp_path / "report.json"
-    path.write_text(json.dumps({"schema": "dv2s-regress", "schema_version": 2,
+    path.write_text(json.dumps({"schema": "dv2s-regress", "schema_version": 3,
                                 "settings": {"seed": 7, "env_config": {"duration": 4}, "failure": ["collision", "off_road", "stall"]}}))
     assert baseline_defaults(path, None, None) == (7, {"duration": 4})
     assert baseline_defaults(path, 2, None) == (2, {"duration": 4})

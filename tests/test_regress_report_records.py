@@ -18,7 +18,7 @@ from dv2s_gym.regress.report import build_report, format_summary, load_report, w
 from scenario_bank.records import RecordError, RegressEpisode
 
 RESULTS = Path(__file__).resolve().parent / "data" / "regress" / "results.jsonl"
-TOP_KEYS = ["schema", "schema_version", "created", "dv2s_version", "bank", "settings", "candidate", "baseline",
+TOP_KEYS = ["schema", "schema_version", "created", "dv2s_version", "code_identity", "bank", "settings", "candidate", "baseline",
             "episodes", "scenarios", "overall", "verdict", "regressed", "newly_failing", "errors", "stopped_early",
             "sequential", "power", "aggregates"]
 """A built report's keys, in the order the report has always had them (``dv2s regress --json`` prints them so)."""

@@ -113,7 +113,7 @@ from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.settings import read_run_settings, RunSettings, SETTINGS_FILE
 from dv2s_gym.mining.report_text import percent_text as _pct
 from policies.run_identity import installed_version
-from dv2s_gym.regress.stats import wilson_interval
+from policies.stats import Rate
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.failure_types import FAILURE_TYPES, severity_order
 from scenario_bank.records import EpisodeRecord, RecordError
@@ -228,21 +228,6 @@ def _clean(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return [_clean(v) for v in value]
     return value
-
-
-def _per_100(count: int, n: int) -> Dict[str, Any]:
-    """``count`` events in ``n`` episodes as a rate per 100 episodes with its Wilson interval."""
-    if n == 0:
-        return {"value": None, "low": None, "high": None, "count": count, "n": 0}
-    low, high = wilson_interval(count, n, CONFIDENCE)
-    return {"value": 100.0 * count / n, "low": 100.0 * low, "high": 100.0 * high, "count": count, "n": n}
-
-
-def _rate(count: int, n: int) -> Dict[str, Any]:
-    if n == 0:
-        return {"value": None, "low": None, "high": None, "count": count}
-    low, high = wilson_interval(count, n, CONFIDENCE)
-    return {"value": count / n, "low": low, "high": high, "count": count}
 
 
 def _by_type(failures: Sequence["FailureEntry"]) -> Dict[str, int]:
@@ -488,8 +473,9 @@ def _sampler_entry(mine: Sequence[EpisodeRecord], found: Sequence[FailureEntry],
         "errors": len(mine) - n,
         "failures": len(found),
         "avoidable_failures": len(avoidable),
-        "failures_per_100": _per_100(len(found), n),
-        "avoidable_failures_per_100": _per_100(len(avoidable), n),
+        "failures_per_100": Rate.of(len(found), n, CONFIDENCE).report_json(scale=100.0, with_n=True),
+        "avoidable_failures_per_100": Rate.of(len(avoidable), n, CONFIDENCE).report_json(scale=100.0,
+                                                                                             with_n=True),
         "clusters": distinct,
         "avoidable_clusters": distinct_avoidable,
         "clusters_per_100": 100.0 * distinct / n if n else None,
@@ -524,7 +510,8 @@ def _per_scenario(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord]
         scenarios[name] = ScenarioSummary(
             episodes=len(ran), errors=sum(1 for e in errors if str(e.scenario) == name), failures=len(found),
             avoidable=sum(f.avoidable is True for f in found), unavoidable=sum(f.avoidable is False for f in found),
-            unknown=sum(f.avoidable is None for f in found), failure_rate=_rate(len(found), len(ran)),
+            unknown=sum(f.avoidable is None for f in found),
+            failure_rate=Rate.of(len(found), len(ran), CONFIDENCE).report_json(),
             estimated_rate=rate.scenarios[name].to_dict() if name in rate.scenarios else None,
             failures_by_type=_by_type(found), failure_types=len({str(f.kind) for f in found}),
             clusters=len(in_clusters), avoidable_clusters=sum(c.avoidable > 0 for c in in_clusters),

@@ -8,6 +8,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 from dv2s_gym.mining.report_record import MineCounts
 from scenario_bank.failure_types import severity_order, type_label
 from scenario_bank.records import Failure
+from scenario_bank.named_registry import replaced_text
 
 __all__ = ["replaced_text", "replaced_in", "breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
            "NOT_COMPARED_REASONS", "not_compared_reason", "not_compared_counts", "not_compared_text",
@@ -90,16 +91,6 @@ def replaced_in(settings: Mapping[str, Any]) -> List[str]:
     ``code_identity`` lists them; :func:`scenario_bank.named_registry.replaced_built_ins`)."""
     identity = settings.get("code_identity")
     return list(identity.get("replaced built-ins") or []) if isinstance(identity, Mapping) else []
-
-
-def replaced_text(replaced: Sequence[str]) -> str:
-    """The sentence a report's banner and ``dv2s mine``'s summary add when plug-ins replaced built-in entries (a
-    detector, the reference driver), so that the counts read as the plug-ins'; ``""`` when none was."""
-    if not replaced:
-        return ""
-    several = len(replaced) > 1
-    return (f"Built-in{'s' if several else ''} replaced by plug-ins: {', '.join(replaced)}; what this run counts "
-            f"under {'those names' if several else 'that name'} is the plug-ins'")
 
 
 def seed_text(settings: Mapping[str, Any]) -> str:

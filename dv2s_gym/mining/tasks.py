@@ -34,7 +34,7 @@ from dv2s_gym.mining.write_errors import write_failure
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import (DEFAULT_MONITOR, Failure, MonitorSettings, detect_failure, robustness,
                                       types_without_detector)
-from dv2s_gym.workers.tasks import register, task_id
+from dv2s_gym.workers.tasks import mark_built_in, register, task_id
 from policies import worker_cache
 from policies.evaluation import run_episode
 from scenario_bank.failure_types import failure_table, failure_type
@@ -230,3 +230,5 @@ def heldout_task(task: Mapping[str, Any]) -> HeldOutEpisode:
 
 register(MINE, run_mine_task)
 register(HELDOUT, heldout_task)
+mark_built_in(MINE)
+mark_built_in(HELDOUT)

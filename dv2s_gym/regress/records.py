@@ -414,7 +414,8 @@ class SequentialOutcome(ReportRecord):
 
 @dataclass(frozen=True, eq=False)
 class RegressReport(ReportRecord):
-    """A regression report (``report.json``, schema in :mod:`dv2s_gym.regress.report`): what ran (``bank``,
+    """A regression report (``report.json``, schema in :mod:`dv2s_gym.regress.report`): the code that judged its
+    episodes (``code_identity``: :func:`policies.run_identity.report_code_identity`), what ran (``bank``,
     ``settings``, ``candidate``, ``baseline``, the paired ``episodes``), each scenario's and the ``overall``
     :class:`ScenarioResult`, the ``verdict`` (``None``: measures only) with ``error_reason`` when errors make it
     ERROR, the ``regressed`` scenarios, the ``newly_failing`` episode ids, the ``errors``, the sequential test
@@ -425,6 +426,7 @@ class RegressReport(ReportRecord):
     schema_version: Optional[int] = None
     created: Optional[str] = None
     dv2s_version: Optional[str] = None
+    code_identity: Optional[Mapping[str, Any]] = None
     bank: Optional[BankInfo] = None
     settings: Optional[ReportSettings] = None
     candidate: Optional[PolicyInfo] = None

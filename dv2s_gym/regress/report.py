@@ -4,12 +4,16 @@
 :mod:`dv2s_gym.regress.records`, read by attribute); its ``to_json()`` is the JSON object below, key for key and in
 this order, and :func:`load_report` reads a ``report.json`` back into one.
 
-JSON schema ``dv2s-regress``, version 2 (:data:`SCHEMA_VERSION`; a change to any key below
+JSON schema ``dv2s-regress``, version 3 (:data:`SCHEMA_VERSION`; a change to any key below
 bumps it, and ``--baseline-report`` refuses a report of another version)::
 
     {
-      "schema": "dv2s-regress", "schema_version": 2,
+      "schema": "dv2s-regress", "schema_version": 3,
       "created": ISO-8601 time (UTC), "dv2s_version": "0.1.0",
+      "code_identity": {"dv2s sources (SHA-256)", "plug-in modules": {module: SHA-256 of its source},
+                        "detectors": {kind: {"failure type": module, "detector": module,
+                                             "sources (SHA-256)": {module: SHA-256}}},
+                        "replaced built-ins": [phrases]}   the code that judged the episodes,
       "bank": {"path": bank folder, "version": SHA-256 over the scenarios used (name + script),
                "scenarios": [names], "hashes": {name: SHA-256 of its script}},
       "settings": {"episodes", "seed", "margin", "alpha", "sequential", "env_config", "backend",
@@ -95,7 +99,8 @@ from dv2s_gym.regress import stats
 from dv2s_gym.regress.aggregates import return_aggregates
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
 from dv2s_gym.regress.failures import failure_kinds, result_value
-from policies.run_identity import installed_version
+from policies.run_identity import BUILT_IN, installed_version, report_code_identity
+from policies.stats import Rate
 from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, PairedEpisode, PolicyInfo,
                                       RegressReport, ReportSettings, RunPower, ScenarioResult, SequentialOutcome,
@@ -103,6 +108,7 @@ from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, 
 from dv2s_gym.regress.store import describe_differences
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
+from scenario_bank.named_registry import replaced_text
 from scenario_bank.records import RecordError, RegressEpisode, recorded
 
 __all__ = [
@@ -118,12 +124,13 @@ __all__ = [
     "load_report",
     "baseline_defaults",
     "check_baseline_report",
+    "check_baseline_code",
     "write_json",
     "write_markdown",
     "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings"]
 
 SCHEMA = "dv2s-regress"
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """The format of ``report.json`` (bumped when its fields change; a report of another version is refused)."""
 CONFIDENCE = 0.95
 
@@ -168,11 +175,7 @@ def _ok(results: Sequence[RegressEpisode]) -> List[RegressEpisode]:
 
 
 def _rate(values: Sequence[bool]) -> Dict[str, Any]:
-    n, k = len(values), int(sum(bool(v) for v in values))
-    if n == 0:
-        return {"value": None, "low": None, "high": None, "count": 0}
-    low, high = stats.wilson_interval(k, n, CONFIDENCE)
-    return {"value": k / n, "low": low, "high": high, "count": k}
+    return Rate.of(sum(bool(v) for v in values), len(values), CONFIDENCE).report_json()
 
 
 def _mean(groups: Sequence[Sequence[float]]) -> Dict[str, Any]:
@@ -275,7 +278,8 @@ def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLik
 def build_report(*, bank: Union[BankInfo, Mapping[str, Any]], settings: Union[ReportSettings, Mapping[str, Any]],
                  candidate: Union[PolicyInfo, Mapping[str, Any]], baseline: Union[None, PolicyInfo, Mapping[str, Any]],
                  episodes: Sequence[Union[PairedEpisode, Mapping[str, Any]]], stopped_early: bool = False,
-                 sequential: Union[None, SequentialOutcome, Mapping[str, Any]] = None) -> RegressReport:
+                 sequential: Union[None, SequentialOutcome, Mapping[str, Any]] = None,
+                 code_identity: Optional[Mapping[str, Any]] = None) -> RegressReport:
     """The report (schema in the module docstring) from the paired episodes.
 
     Args:
@@ -290,6 +294,9 @@ def build_report(*, bank: Union[BankInfo, Mapping[str, Any]], settings: Union[Re
         stopped_early / sequential: the sequential test's outcome (a
             :class:`~dv2s_gym.regress.records.SequentialOutcome` or its JSON object; its ``verdict``, when set, is the
             overall verdict of a sequential run; a scenario FAIL still FAILs).
+        code_identity: the code that judged the episodes
+            (:func:`policies.run_identity.report_code_identity`); default: this process's, for the run's failure
+            kinds.
     """
     bank, settings = BankInfo.from_dict(bank), ReportSettings.from_dict(settings)
     sequential = SequentialOutcome.from_dict(sequential) if sequential is not None else None
@@ -321,7 +328,9 @@ def build_report(*, bank: Union[BankInfo, Mapping[str, Any]], settings: Union[Re
     return RegressReport(
         schema=SCHEMA, schema_version=SCHEMA_VERSION,
         created=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        dv2s_version=installed_version(), bank=bank, settings=settings, candidate=PolicyInfo.from_dict(candidate),
+        dv2s_version=installed_version(),
+        code_identity=dict(code_identity) if code_identity is not None else report_code_identity(
+            settings.failure or ()), bank=bank, settings=settings, candidate=PolicyInfo.from_dict(candidate),
         baseline=PolicyInfo.from_dict(baseline) if has_baseline else None, episodes=tuple(paired),
         scenarios=report_scenarios, overall=overall, verdict=verdict, regressed=tuple(compared.regressed),
         newly_failing=tuple(compared.newly_failing), errors=tuple(errors), stopped_early=bool(stopped_early),
@@ -457,6 +466,49 @@ def check_baseline_report(report: RegressReport, *, path: Union[str, os.PathLike
             " run with the same --config, or rerun the baseline")
 
 
+def _judge(entry: Any) -> str:
+    """Who decided a failure kind, from a report's ``code_identity["detectors"][kind]``."""
+    if not isinstance(entry, Mapping):
+        return "no recorded detector"
+    sources = entry.get("sources (SHA-256)") or {}
+
+    def named(module: Any) -> str:
+        return str(module) + (f" (source {str(sources[module])[:12]})" if module in sources else "")
+    text = f"detector {named(entry.get('detector'))}"
+    if entry.get("failure type") != BUILT_IN:
+        text += f", failure type {named(entry.get('failure type'))}"
+    return text
+
+
+_OTHER_CODE = ("dv2s sources (SHA-256)", "plug-in modules", "replaced built-ins")
+"""The parts of a report's ``code_identity`` besides the judged kinds' detectors: a difference is flagged."""
+
+
+def check_baseline_code(report: RegressReport, *, path: Union[str, os.PathLike], kinds: Sequence[str],
+                        code_identity: Mapping[str, Any]) -> Optional[str]:
+    """Refuse a baseline report whose detector for any failure kind of ``kinds`` differs from this run's
+    (``code_identity``: :func:`policies.run_identity.report_code_identity`), naming the kind and both sides; give
+    a warning naming the other parts of the code that differ (``None``: none does).
+
+    Raises:
+        ReportMismatchError: the kinds' episodes would be counted by two different detectors.
+    """
+    theirs = dict(report.code_identity or {})
+    their_detectors, our_detectors = dict(theirs.get("detectors") or {}), dict(code_identity.get("detectors") or {})
+    for kind in kinds:
+        if their_detectors.get(kind) != our_detectors.get(kind):
+            raise ReportMismatchError(
+                f"baseline report {path} judged failure kind {kind!r} with another detector than this run "
+                f"({_judge(their_detectors.get(kind))} there, {_judge(our_detectors.get(kind))} here), so the two "
+                f"sides would count {kind} differently; rerun the baseline with the same plug-ins as this run "
+                "(DV2S_PLUGINS), or run it here with --baseline POLICY instead of --baseline-report")
+    other = [part.replace(" (SHA-256)", "") for part in _OTHER_CODE if theirs.get(part) != code_identity.get(part)]
+    if not other:
+        return None
+    return (f"baseline report {path} was made with other code ({', '.join(other)} differ): differences may not "
+            "be the candidate's; rerun the baseline with this code to be sure")
+
+
 # ----------------------------------------------------------------------------------- text
 def _pct(value: Optional[float]) -> str:
     return "-" if value is None else f"{100 * value:.1f}%"
@@ -525,9 +577,12 @@ def scenarios_by_severity(report: RegressReport) -> List[str]:
 
 
 def warnings(report: RegressReport) -> List[str]:
-    """What a reader must know before trusting the verdict (a baseline from another dv2s version, ...)."""
+    """What a reader must know before trusting the verdict (a baseline from another dv2s version or other code, a
+    built-in entry such as a detector that plug-ins replaced, ...)."""
     baseline = report.baseline
-    return [str(baseline.warning)] if baseline is not None and baseline.warning else []
+    found = [str(baseline.warning)] if baseline is not None and baseline.warning else []
+    replaced = list((report.code_identity or {}).get("replaced built-ins") or [])
+    return found + ([replaced_text(replaced)] if replaced else [])
 
 
 def power_lines(report: RegressReport) -> List[str]:

@@ -34,12 +34,14 @@ from dv2s_gym.regress.failures import DEFAULT_STALL_SECONDS, apply_failure, miss
 from dv2s_gym.regress.report import (
     bank_info,
     build_report,
+    check_baseline_code,
     check_baseline_report,
     load_report,
     paired_tables,
 )
 from dv2s_gym.regress.outputs import write_reports
 from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, code_identity, installed_version,
+                                   report_code_identity,
                                    resume_fingerprint)
 from dv2s_gym.regress.store import BASELINE_FINGERPRINT, RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
@@ -138,13 +140,15 @@ def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Se
 
 
 def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: Sequence[int], bank: BankInfo,
-                          env_config: Dict[str, Any], settings: RegressSettings
+                          env_config: Dict[str, Any], settings: RegressSettings, judged_by: Mapping[str, Any]
                           ) -> Tuple[PolicyInfo, Dict[str, RegressEpisode], str]:
-    """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
+    """The baseline info, the baseline result per episode id, and the report file's SHA-256 (``judged_by``: the code
+    this run judges its episodes by, :func:`policies.run_identity.report_code_identity`)."""
     path, role, failure = Path(report.path), report.role, list(settings.failure)
     monitor, accept_failed = settings.monitor, report.accept_failed
     old = load_report(path)
     check_baseline_report(old, path=path, bank=bank, env_config=env_config)  # a report with errors: never
+    code_warning = check_baseline_code(old, path=path, kinds=failure, code_identity=judged_by)
     if old.verdict in ("FAIL", "ERROR") and not accept_failed:
         raise ReportMismatchError(
             f"baseline report {path} has the verdict {old.verdict}: its candidate did not pass its own gate, so "
@@ -186,10 +190,11 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
     records = {episode_id: _baseline_record(path, apply_failure(result.to_dict(), failure))
                for episode_id, result in results.items()}
     theirs, ours = old.dv2s_version, installed_version()
-    warning = None if theirs == ours else (
+    flagged = [None if theirs == ours else (
         f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
         "policies may have changed between them, so differences may not be the candidate's; "
-        "rerun the baseline with this version to be sure")
+        "rerun the baseline with this version to be sure"), code_warning]
+    warning = "; ".join(text for text in flagged if text) or None
     info = PolicyInfo(report=str(path.resolve()), role=role, spec=their.spec, card=their.card, warning=warning,
                       null_fields=frozenset({"spec", "card"}))
     return info, records, hashlib.sha256(path.read_bytes()).hexdigest()
@@ -257,7 +262,7 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     report_settings["power"] = float(settings.power if settings.power is not None else power_plan.DEFAULT_POWER)
     report = build_report(bank=plan.bank, settings=report_settings, candidate=plan.candidate_info,
                           baseline=plan.baseline_info, episodes=episodes.paired(ran.seeds),
-                          stopped_early=ran.stopped_early, sequential=ran.sequential)
+                          stopped_early=ran.stopped_early, sequential=ran.sequential, code_identity=plan.judged_by)
     report = report.replace(hostname=socket.gethostname(),
                             timing={name: round(value, 3) for name, value in episodes.timing.items()},
                             duration=round(time.time() - started, 3))
@@ -285,6 +290,8 @@ class _Plan:
     baseline_info: Optional[PolicyInfo]
     old_results: Dict[str, RegressEpisode]
     report_hash: Optional[str]
+    judged_by: Dict[str, Any]
+    """The code the run judges its episodes by (:func:`policies.run_identity.report_code_identity`)."""
 
 
 def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], settings: RegressSettings) -> _Plan:
@@ -312,13 +319,15 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
     baseline_info = _policy_info(spec, env_config) if spec is not None else None  # a bad baseline spec is bad input too
     old_results: Dict[str, RegressEpisode] = {}
     report_hash = None
+    judged_by = report_code_identity(failure)
     if report is not None:
         baseline_info, old_results, report_hash = _baseline_from_report(report, names, seeds, bank, env_config,
-                                                                        settings)
+                                                                        settings, judged_by)
     return _Plan(candidate=candidate, baseline_spec=spec, report=report, bank_dir=bank_dir, env_config=env_config,
                  failure=failure, names=names, bank=bank, episodes=episodes, plan=planned, seeds=seeds,
                  batch=settings.batch or max(1, math.ceil(episodes / 5)), candidate_info=candidate_info,
-                 baseline_info=baseline_info, old_results=old_results, report_hash=report_hash)
+                 baseline_info=baseline_info, old_results=old_results, report_hash=report_hash,
+                 judged_by=judged_by)
 
 
 def _untrusted(bank_dir: Optional[str], env_config: Mapping[str, Any]) -> List[str]:

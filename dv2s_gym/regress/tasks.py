@@ -12,9 +12,11 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 - ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; default collision, off-road, stall);
 - ``monitor``: the monitors' settings (an :class:`envs.safety_metrics.MonitorSettings`: its ``stall_seconds``).
 
-A failure type registered at run time (:func:`scenario_bank.failure_types.register_failure_type`) with a
-``result_field`` is recorded in that field by running its detector
-(:func:`dv2s_gym.mining.monitors.register_detector`) on the episode's trace. Every worker process imports the
+Every failure type with a ``result_field`` is recorded in that field as ``dv2s mine`` decides it
+(:func:`scenario_bank.failure_types.happened`): a type registered at run time
+(:func:`scenario_bank.failure_types.register_failure_type`) and a built-in type whose detector a plug-in replaced
+(:func:`dv2s_gym.mining.monitors.register_detector`) by running that detector on the episode's trace, the other
+built-in types by the facts the episode records (``collided``, ``off_road``, ``stalled``). Every worker process imports the
 plug-in modules of the process that started it before its first task (:mod:`scenario_bank.plugins`), so a
 plug-in module that registers the type and its detector when it is imported registers them there too; a task
 naming a type this process still does not know comes back as an error result that says so.
@@ -41,7 +43,7 @@ import traceback
 from pathlib import Path
 from typing import Any, Dict
 
-from dv2s_gym.workers.tasks import error_result, register, task_id
+from dv2s_gym.workers.tasks import error_result, mark_built_in, register, task_id
 from policies import worker_cache
 from scenario_bank.records import RegressEpisode
 from dv2s_gym.regress.failures import apply_failure, failure_kinds, parse_failure
@@ -91,9 +93,9 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
     period = 1.0 / float(trace.config.get("policy_frequency", 5))
     data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None, seconds=round(seconds, 4),
                 stalled=stall is not None, stall_time=None if stall is None else stall * period)
-    for row in failure_table():  # a registered type's field: its detector on the trace
-        if row.result_field and row.result_field not in data:
-            data[row.result_field] = happened(row.name, result, trace, monitor)
+    for row in failure_table():  # every kind decided as the miner decides it: by the detector registry
+        if row.result_field:
+            data[row.result_field] = happened(row.name, result, trace, monitor, recorded=data)
     apply_failure(data, parse_failure(task.get("failure")))
     trace_dir = task.get("trace_dir")
     if data["failed"] and trace_dir:
@@ -104,3 +106,4 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
 
 
 register(KIND, run_regress_task)
+mark_built_in(KIND)

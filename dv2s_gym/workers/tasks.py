@@ -25,8 +25,8 @@ from scenario_bank.records import JsonRecord
 if "numpy" not in sys.modules:  # a fresh worker process (e.g. Ray's): one BLAS/OpenMP thread per worker
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-__all__ = ["TaskFunction", "register", "function_for", "task_modules", "worker_plugins", "start_plugins", "run_task",
-           "result_object", "task_id", "error_result", "gave_up_result"]
+__all__ = ["TaskFunction", "register", "mark_built_in", "function_for", "task_modules", "worker_plugins",
+           "start_plugins", "run_task", "result_object", "task_id", "error_result", "gave_up_result"]
 
 TaskFunction = Callable[[Dict[str, Any]], Dict[str, Any]]
 """Runs one task in a worker process and returns its result (a JSON-able dict)."""
@@ -55,7 +55,23 @@ def register(kind: str, function: TaskFunction, overwrite: bool = False) -> Task
     if existing is not None and _name(existing) != _name(function) and not overwrite:
         raise WorkerError(f"task kind {kind!r} is registered twice ({_name(existing)} and {_name(function)}); "
                           "pass overwrite=True to replace it")
+    if existing is not None and _name(existing) == _name(function):  # its module imported again: no replacement
+        built_in = _KINDS.is_built_in(kind)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", BuiltInReplacedWarning)
+            _KINDS.register(kind, function, overwrite=True, module=function.__module__)
+        if built_in:
+            _KINDS.mark_built_in(kind)
+        return function
     return _KINDS.register(kind, function, overwrite=True, module=function.__module__)
+
+
+def mark_built_in(kind: str) -> None:
+    """The task kind ``kind`` is one of the product's own (``"regress"``, ``"mine"``, ``"heldout"``, each marked by
+    the module that registers it): a plug-in's ``register(kind, f, overwrite=True)`` then issues a
+    :class:`~scenario_bank.errors.BuiltInReplacedWarning` and counts among
+    :func:`scenario_bank.named_registry.replaced_built_ins`."""
+    _KINDS.mark_built_in(kind)
 
 
 def function_for(task: Mapping[str, Any]) -> TaskFunction:
