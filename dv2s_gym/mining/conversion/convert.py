@@ -286,7 +286,7 @@ class _Conversion:
             description.elements = elements_from_text(description.text)
         self.out["description"] = description.text
         write_run_file(self.conversion / "description.txt", description.text.strip() + "\n")
-        write_run_file(self.conversion / "elements.json", json.dumps(description.elements, indent=2) + "\n")
+        write_run_file(self.conversion / "elements.json", json.dumps(description.elements.to_dict(), indent=2) + "\n")
         self.details["description"] = description.as_dict()
         self.description = description
         self.lap("describe")
@@ -348,7 +348,7 @@ class _Conversion:
         truth = elements_from_trace(self.source_trace)
         scores = [e2e_sc(truth, elements_from_trace(trace)) for trace in self.traces]
         self.out["e2e_sc"] = float(np.mean(scores))
-        self.details["source_elements"] = truth
+        self.details["source_elements"] = truth.to_dict()
         self.lap("e2e_sc")
 
     def _judge(self) -> None:
