@@ -65,7 +65,6 @@ import json
 import os
 import re
 import time
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Union
 
@@ -308,7 +307,7 @@ class _Conversion:
 
         check = check_scenario(self.generation.script, seed=self.settings.seed,
                                name=f"mined failure {self.record.index}", in_process=False)
-        self.details["check"] = {**asdict(check), "ok": check.ok}
+        self.details["check"] = check.to_json()
         self.lap("check")
         if not check.ok:
             failed = next(s for s in ("safety", "compile", "sample", "run")
