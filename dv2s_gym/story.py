@@ -43,7 +43,7 @@ from dv2s_gym.story_check import check_story
 from policies.baselines import IDMEgo, KeepLaneEgo
 from policies.probe_drivers import HangbackEgo, RushEgo, SurgeEgo, WeaveEgo
 from scenario_bank.bank import Bank
-from scenario_bank.elements import normalize_elements
+from scenario_bank.elements import Elements
 from scenario_bank.errors import DV2SError, UnknownScenarioError
 from scenario_bank.story import normalize_story
 
@@ -80,14 +80,14 @@ STORY_SECONDS: Dict[str, float] = {}
 """Episode lengths that differ from the env's default duration, per scenario."""
 
 
-def required_elements(elements: Dict[str, Any], ego: str) -> set:
+def required_elements(elements: Elements, ego: str) -> set:
     """The ``(kind, action)`` and ``(kind, relation, other)`` tuples an episode with ``ego`` must show."""
-    required = {tuple(a) for a in elements.get("actions", []) if ego == "scenic" or a[0] != "ego"}
-    required |= {tuple(r) for r in elements.get("relations", []) if r[0] != "ego"}
+    required = {a for a in elements.actions if ego == "scenic" or a[0] != "ego"}
+    required |= {r for r in elements.relations if r[0] != "ego"}
     return required
 
 
-def story_problem(elements: Dict[str, Any], shown: Dict[str, Any], ego: str,
+def story_problem(elements: Elements, shown: Elements, ego: str,
                   ego_hit: Sequence[str] = ()) -> Optional[str]:
     """What of the story an episode that shows ``shown`` misses; None when it plays the story.
 
@@ -96,7 +96,7 @@ def story_problem(elements: Dict[str, Any], shown: Dict[str, Any], ego: str,
     required = required_elements(elements, ego)
     if set(ego_hit) & {r[0] for r in required if r[0] != "ego"}:
         return None
-    have = {tuple(a) for a in shown.get("actions", [])} | {tuple(r) for r in shown.get("relations", [])}
+    have = set(shown.actions) | set(shown.relations)
     missing = sorted(required - have)
     return ("missing " + ", ".join(" ".join(map(str, m)) for m in missing)) if missing else None
 
@@ -167,7 +167,7 @@ def story_episodes(name: str, ego: str, seeds: Sequence[int], bank_root: Optiona
     entry = Bank(bank_root).get(name)
     story = entry.sidecar.story
     story = normalize_story(story, f"{name}: story") if story is not None else None
-    elements = normalize_elements(entry.elements)
+    elements = entry.elements
     seconds = STORY_SECONDS.get(name)
     records = []
     for seed in seeds:

@@ -675,7 +675,7 @@ def _actor_elements(trace, name: str) -> set:
     cut = SimpleNamespace(states=states, events=events, config=trace.config, params=trace.params,
                           kinds={"ego": "ego", marker: kind})
     shown = elements_from_trace(cut)
-    return {a for k, a in shown["actions"] if k == kind}
+    return {a for k, a in shown.actions if k == kind}
 
 
 def _frame(reference: np.ndarray, other: np.ndarray) -> Tuple[float, float]:

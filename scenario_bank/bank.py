@@ -67,6 +67,7 @@ from scenario_bank.entries import (BANK_VERSION, ENTRY_FILE_KEYS, ENTRY_FILES, M
                                    SOURCE_KINDS, PathLike, ScenarioEntry, entry_bytes,
                                    entry_file_name, entry_files, entry_matches, new_sidecar, read_json, scan_entries,
                                    unsafe_input)
+from scenario_bank.elements import Elements
 from scenario_bank.records import CONTROL_FIX, Provenance, Sidecar, control_character_field
 from scenario_bank.errors import (BankError, BankOptionError, BankVersionError, DuplicateScenarioError, NotABankError,
                                   NearDuplicateWarning,
@@ -303,12 +304,12 @@ class Bank:
             "problems": len(self.problems),
             "by_map": count(e.map or "?" for e in entries),
             "by_source": count(e.source.kind or "?" for e in entries),
-            "by_road": count(e.elements.get("road") or "?" for e in entries),
+            "by_road": count(e.elements.road or "?" for e in entries),
             "by_tag": count(t for e in entries for t in e.tags),
-            "by_participant": count(p for e in entries for p in set(e.elements.get("participants", []))),
+            "by_participant": count(p for e in entries for p in set(e.elements.participants)),
         }
 
-    def find_duplicate(self, script: str, elements: Optional[Mapping[str, Any]],
+    def find_duplicate(self, script: str, elements: Optional[Elements],
                        map_name: Optional[str]) -> Optional[Tuple[str, str]]:
         """``(name, how)`` of an entry byte-for-byte identical to this script, or semantically identical (same
         elements, map and parameter ranges; when ``elements`` is given), or ``None``."""
@@ -512,7 +513,7 @@ class Bank:
         self._load(locked=True)
         return self._entries[name]
 
-    def find_near_duplicate(self, script: str, elements: Mapping[str, Any],
+    def find_near_duplicate(self, script: str, elements: Elements,
                             map_name: Optional[str]) -> Optional[Tuple[str, str]]:
         """``(name, how)`` of an entry identical to this script (:meth:`find_duplicate`) or a near-duplicate
         of it (:func:`near_duplicate`: same map and elements, overlapping numeric parameter ranges)."""
@@ -708,7 +709,7 @@ class EntryBatch:
         """The names the staged entries get, in staging order."""
         return [name for name, _, _ in self._staged]
 
-    def duplicate_of(self, script: str, elements: Optional[Mapping[str, Any]],
+    def duplicate_of(self, script: str, elements: Optional[Elements],
                      map_name: Optional[str]) -> Optional[Tuple[str, str]]:
         """``(name, how)`` of a bank entry this script duplicates (:meth:`Bank.find_duplicate`) or of an entry staged
         before with the same script, or ``None``."""

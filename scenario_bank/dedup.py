@@ -13,7 +13,7 @@ import json
 import re
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
-from scenario_bank.elements import normalize_elements
+from scenario_bank.elements import Elements
 
 __all__ = ["content_hash", "names_something", "semantic_key", "param_ranges", "near_duplicate", "NEAR_COPY_LINES",
            "changed_code_lines", "find_duplicate", "find_near_duplicate", "find_near_copy"]
@@ -29,21 +29,20 @@ _RANDOM = re.compile(r"\b(Range|DiscreteRange|Uniform|Discrete|Normal|TruncatedN
                      r"VerifaiDiscreteRange|VerifaiOptions)\s*\(")
 
 
-def names_something(elements: Optional[Mapping[str, Any]]) -> bool:
+def names_something(elements: Optional[Elements]) -> bool:
     """Whether ``elements`` say what happens in a scene: at least one participant, action or relation. Elements
     that name nothing (a hand-added script without ``--elements``) tell no two scenes apart, so they make no
     semantic duplicate (only the scripts' bytes compare) and a near-duplicate only through shared parameters."""
     if elements is None:
         return False
-    normal = normalize_elements(elements)
-    return bool(normal.get("participants") or normal.get("actions") or normal.get("relations"))
+    return bool(elements.participants or elements.actions or elements.relations)
 
 
-def semantic_key(elements: Mapping[str, Any], map_name: Optional[str], script: str) -> str:
+def semantic_key(elements: Elements, map_name: Optional[str], script: str) -> str:
     """What makes two scenarios the same: elements, map and the multiset of parameter ranges."""
     ranges = sorted(re.sub(r"\s+", "", value) for name, value in _PARAM.findall(script)
                     if name not in ("map", "weather") and _RANDOM.search(value))
-    payload = json.dumps([normalize_elements(elements), map_name, ranges], sort_keys=True)
+    payload = json.dumps([elements.to_dict(), map_name, ranges], sort_keys=True)
     return hashlib.sha256(payload.encode()).hexdigest()
 
 
@@ -86,13 +85,13 @@ def param_ranges(script: str) -> Dict[str, Tuple[float, float]]:
     return out
 
 
-def near_duplicate(elements_a: Mapping[str, Any], map_a: Optional[str], script_a: str,
-                   elements_b: Mapping[str, Any], map_b: Optional[str], script_b: str) -> bool:
-    """Whether two scenarios are near-duplicates: the same map, the same elements (canonical form) and
+def near_duplicate(elements_a: Elements, map_a: Optional[str], script_a: str,
+                   elements_b: Elements, map_b: Optional[str], script_b: str) -> bool:
+    """Whether two scenarios are near-duplicates: the same map, the same elements and
     every numeric parameter both scripts define ranging over overlapping intervals. Elements that name nothing
     (:func:`names_something`) need at least one such parameter in common: two scripts without elements or shared
     parameters are told apart by nothing, so they are not called alike."""
-    if map_a != map_b or normalize_elements(elements_a) != normalize_elements(elements_b):
+    if map_a != map_b or elements_a != elements_b:
         return False
     ranges_a, ranges_b = param_ranges(script_a), param_ranges(script_b)
     shared = set(ranges_a) & set(ranges_b)
@@ -125,7 +124,7 @@ def changed_code_lines(script_a: str, script_b: str) -> int:
 
 
 def find_duplicate(entries: Mapping[str, Any], semantic_keys: Mapping[str, str], script: str,
-                   elements: Optional[Mapping[str, Any]], map_name: Optional[str]) -> Optional[Tuple[str, str]]:
+                   elements: Optional[Elements], map_name: Optional[str]) -> Optional[Tuple[str, str]]:
     """``(name, how)`` of the entry (of ``entries``, name -> entry; ``semantic_keys``, name -> its
     :func:`semantic_key`) byte-for-byte identical to ``script``, or semantically identical when ``elements`` is
     given and names something (:func:`names_something`); else ``None``."""
@@ -142,13 +141,13 @@ def find_duplicate(entries: Mapping[str, Any], semantic_keys: Mapping[str, str],
 
 
 def find_near_duplicate(entries: Mapping[str, Any], semantic_keys: Mapping[str, str], script: str,
-                        elements: Mapping[str, Any], map_name: Optional[str]) -> Optional[Tuple[str, str]]:
+                        elements: Elements, map_name: Optional[str]) -> Optional[Tuple[str, str]]:
     """``(name, how)`` of an entry identical to this script (:func:`find_duplicate`) or a near-duplicate
     of it (:func:`near_duplicate`: same map and elements, overlapping numeric parameter ranges)."""
     duplicate = find_duplicate(entries, semantic_keys, script, elements, map_name)
     if duplicate is not None:
         return duplicate
-    wanted = normalize_elements(elements)
+    wanted = elements
     for name in sorted(entries):
         entry = entries[name]
         if entry.map != map_name or entry.elements != wanted:

@@ -22,6 +22,9 @@ front, opposite directions) or ``collide_side`` (anything else: angle, T-bone,
 sideswipe). A description saying "a rear-end collision" states ``collide`` and
 ``collide_rear_end`` for the colliding participants.
 
+In code a record is an :class:`Elements` (:meth:`Elements.from_dict` reads the JSON object above and checks it
+against the vocabulary, :meth:`Elements.to_dict` writes it back).
+
 For the metrics a label becomes a set of hashable elements (:func:`element_set`):
 ``("road", r)``, ``("participant", type, k)`` for the k-th of a type (so counts
 matter), ``("action", type, action)`` and ``("relation", a, rel, b)``.
@@ -29,8 +32,10 @@ matter), ``("action", type, action)`` and ``("relation", a, rel, b)``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping as _MappingABC
+from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any, Dict, FrozenSet, Iterable, List, Mapping, Tuple
+from typing import Any, Dict, FrozenSet, Iterable, Iterator, List, Mapping, Optional, Tuple, Union
 
 from scenario_bank.errors import DV2SError
 
@@ -43,7 +48,7 @@ __all__ = [
     "RELATIONS",
     "CAN_DO",
     "ElementError",
-    "normalize_elements",
+    "Elements",
     "element_set",
     "empty_elements",
     "with_undirected",
@@ -102,38 +107,82 @@ class ElementError(DV2SError, ValueError):
     """Elements that do not follow the vocabulary."""
 
 
-def empty_elements() -> Dict[str, Any]:
+_FIELDS = ("road", "participants", "actions", "relations")
+
+
+@dataclass(frozen=True)
+class Elements(_MappingABC):
+    """The semantic elements of one scene: its ``road`` (one of :data:`ROADS`, or ``None``), its ``participants``
+    (a multiset of :data:`PARTICIPANTS`, sorted), its ``actions`` (``(participant type, action)`` pairs) and its
+    ``relations`` (``(participant type, relation, participant type)`` triples), each sorted and without repeats.
+
+    Built from any content (lists or tuples, in any order, with repeated actions or relations), a record holds its
+    canonical form and checks it against the vocabulary (:class:`ElementError` names the offending entry), so two
+    records of the same content compare and hash equal. Its JSON object is :meth:`to_dict`; the record is also a
+    read-only mapping over it (``elements["actions"]``, lists), for code written against the files' dict form (the
+    product reads fields).
+    """
+
+    road: Optional[str] = None
+    participants: Tuple[str, ...] = ()
+    actions: Tuple[Tuple[str, str], ...] = ()
+    relations: Tuple[Tuple[str, str, str], ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.road is not None:
+            _check(self.road, ROADS, "road type")
+        participants = tuple(sorted(_check(p, PARTICIPANTS, "participant") for p in self.participants))
+        actions = tuple(sorted({(_check(a[0], PARTICIPANTS, "participant"), _check(a[1], ACTIONS, "action"))
+                                for a in _pairs(self.actions, 2, "action")}))
+        relations = tuple(sorted({(_check(r[0], PARTICIPANTS, "participant"), _check(r[1], RELATIONS, "relation"),
+                                   _check(r[2], PARTICIPANTS, "participant"))
+                                  for r in _pairs(self.relations, 3, "relation")}))
+        object.__setattr__(self, "participants", participants)
+        object.__setattr__(self, "actions", actions)
+        object.__setattr__(self, "relations", relations)
+
+    @classmethod
+    def from_dict(cls, data: Union["Elements", Mapping[str, Any]]) -> "Elements":
+        """The record of ``data``: a JSON object with (some of) the keys ``road``, ``participants``, ``actions``
+        and ``relations`` as a label or sidecar holds it, or a record (returned as it is). :class:`ElementError`
+        names a field or entry that does not follow the vocabulary."""
+        if isinstance(data, cls):
+            return data
+        if not isinstance(data, Mapping):
+            raise ElementError(f"elements must be a JSON object, got {type(data).__name__}")
+        unknown = set(data) - set(_FIELDS)
+        if unknown:
+            raise ElementError(f"unknown element fields {sorted(unknown)}; "
+                               "allowed: road, participants, actions, relations")
+        return cls(data.get("road"), data.get("participants", []), data.get("actions", []),
+                   data.get("relations", []))
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The JSON object of the record (a new dict each call): ``road`` (``null`` when ``None``), then
+        ``participants``, ``actions`` and ``relations`` as lists."""
+        return {"road": self.road, "participants": list(self.participants),
+                "actions": [list(a) for a in self.actions], "relations": [list(r) for r in self.relations]}
+
+    # Read-only mapping access to the JSON object, kept for code outside the product (the product reads fields).
+    def __getitem__(self, key: str) -> Any:
+        return self.to_dict()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_FIELDS)
+
+    def __len__(self) -> int:
+        return len(_FIELDS)
+
+
+def empty_elements() -> Elements:
     """An element record with nothing in it."""
-    return {"road": None, "participants": [], "actions": [], "relations": []}
+    return Elements()
 
 
 def _check(value: str, allowed: Iterable[str], what: str) -> str:
     if value not in allowed:
         raise ElementError(f"unknown {what} {value!r}; use one of: {', '.join(allowed)}")
     return value
-
-
-def normalize_elements(data: Mapping[str, Any]) -> Dict[str, Any]:
-    """Validate an element record and return it in canonical form (sorted, de-duplicated).
-
-    Raises :class:`ElementError` naming the offending entry.
-    """
-    if not isinstance(data, Mapping):
-        raise ElementError(f"elements must be a JSON object, got {type(data).__name__}")
-    unknown = set(data) - {"road", "participants", "actions", "relations"}
-    if unknown:
-        raise ElementError(f"unknown element fields {sorted(unknown)}; allowed: road, participants, actions, relations")
-    road = data.get("road")
-    if road is not None:
-        _check(road, ROADS, "road type")
-    participants = sorted(_check(p, PARTICIPANTS, "participant") for p in data.get("participants", []))
-    actions = sorted({(_check(a[0], PARTICIPANTS, "participant"), _check(a[1], ACTIONS, "action"))
-                      for a in _pairs(data.get("actions", []), 2, "action")})
-    relations = sorted({(_check(r[0], PARTICIPANTS, "participant"), _check(r[1], RELATIONS, "relation"),
-                         _check(r[2], PARTICIPANTS, "participant"))
-                        for r in _pairs(data.get("relations", []), 3, "relation")})
-    return {"road": road, "participants": participants, "actions": [list(a) for a in actions],
-            "relations": [list(r) for r in relations]}
 
 
 def _pairs(items: Iterable, size: int, what: str) -> List[Tuple[str, ...]]:
@@ -145,18 +194,19 @@ def _pairs(items: Iterable, size: int, what: str) -> List[Tuple[str, ...]]:
     return out
 
 
-def element_set(data: Mapping[str, Any]) -> FrozenSet[Element]:
-    """The set of semantic elements of a record, as the metrics compare them."""
-    data = normalize_elements(data)
-    elements = set()
-    if data["road"] is not None:
-        elements.add(("road", data["road"]))
+def element_set(data: Union[Elements, Mapping[str, Any]]) -> FrozenSet[Element]:
+    """The set of semantic elements of a record (or of its JSON object, such as a label file's), as the metrics
+    compare them."""
+    record = Elements.from_dict(data)
+    elements: set = set()
+    if record.road is not None:
+        elements.add(("road", record.road))
     counts: Dict[str, int] = {}
-    for p in data["participants"]:
+    for p in record.participants:
         counts[p] = counts.get(p, 0) + 1
         elements.add(("participant", p, counts[p]))
-    elements.update(("action", a, b) for a, b in data["actions"])
-    elements.update(("relation", a, r, b) for a, r, b in data["relations"])
+    elements.update(("action", a, b) for a, b in record.actions)
+    elements.update(("relation", a, r, b) for a, r, b in record.relations)
     return frozenset(elements)
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from scenario_bank.dedup import content_hash, semantic_key
-from scenario_bank.elements import ElementError, normalize_elements
+from scenario_bank.elements import ElementError, Elements
 from scenario_bank.errors import BankError, BankVersionError, NotABankError, UnsafeBankInputError
 from scenario_bank.records import (CONTROL_FIX, ENTRY_FILES, MINED_PROVENANCE_FIELDS, PROVENANCE_FIELDS, SCRIPT,
                                    SIDECAR, SIDECAR_VERSION, SOURCE_KINDS, Provenance, RecordError, Sidecar,
@@ -124,9 +124,9 @@ class ScenarioEntry:
         return self.sidecar.description
 
     @property
-    def elements(self) -> Mapping[str, Any]:
-        """The entry's elements in canonical form (:func:`~scenario_bank.elements.normalize_elements`)."""
-        return self.sidecar.elements or {"road": None, "participants": [], "actions": [], "relations": []}
+    def elements(self) -> Elements:
+        """The entry's elements (empty when its sidecar has none)."""
+        return self.sidecar.elements or Elements()
 
     @property
     def tags(self) -> List[str]:
@@ -159,7 +159,7 @@ class ScenarioEntry:
     def summary(self) -> Dict[str, Any]:
         """A JSON-ready record for listings."""
         return {"name": self.name, "description": self.description, "tags": self.tags, "map": self.map,
-                "source": self.source.kind, "elements": self.elements, "content_hash": self.content_hash,
+                "source": self.source.kind, "elements": self.elements.to_dict(), "content_hash": self.content_hash,
                 "path": str(self.script_path)}
 
 
@@ -168,7 +168,8 @@ def validate_sidecar(meta: Any, folder: Path) -> Sidecar:
     :class:`~scenario_bank.records.RecordError` naming the field, or a :class:`BankVersionError`) and that the
     folder holds its script; return its record, its elements in canonical form."""
     record = Sidecar.from_dict(meta)
-    record = record.replace(elements=normalize_elements(record.elements or {}))
+    if record.elements is None:
+        record = record.replace(elements=Elements())
     if not regular_file_in_folder(folder.parent, f"{folder.name}/{SCRIPT}"):
         if os.path.lexists(folder / SCRIPT):
             raise UnsafeBankInputError(f"the script {SCRIPT} is not a regular file (a link, a FIFO or a device?); "
@@ -177,15 +178,15 @@ def validate_sidecar(meta: Any, folder: Path) -> Sidecar:
     return record
 
 
-def _has_element(elements: Mapping[str, Any], wanted: str) -> bool:
+def _has_element(elements: Elements, wanted: str) -> bool:
     if ":" in wanted:
         who, what = wanted.split(":", 1)
-        return [who, what] in elements.get("actions", [])
+        return (who, what) in elements.actions
     return (
-        wanted == elements.get("road")
-        or wanted in elements.get("participants", [])
-        or any(a[1] == wanted for a in elements.get("actions", []))
-        or any(r[1] == wanted for r in elements.get("relations", []))
+        wanted == elements.road
+        or wanted in elements.participants
+        or any(a[1] == wanted for a in elements.actions)
+        or any(r[1] == wanted for r in elements.relations)
     )
 
 
@@ -229,7 +230,7 @@ def entry_matches(entry: ScenarioEntry, tag: Optional[str], needle: Optional[str
         return False
     if needle is not None and needle not in entry.name.lower() and needle not in sidecar.description.lower():
         return False
-    return all(_has_element(sidecar.elements or {}, w) for w in wanted)
+    return all(_has_element(sidecar.elements or Elements(), w) for w in wanted)
 
 
 @dataclass
@@ -318,7 +319,8 @@ def entry_bytes(root: Path, entry: ScenarioEntry) -> List[Tuple[str, bytes]]:
     return out
 
 
-def new_sidecar(script: str, description: str, name: Optional[str], elements: Optional[Mapping[str, Any]],
+def new_sidecar(script: str, description: str, name: Optional[str],
+                elements: Union[None, Elements, Mapping[str, Any]],
                 tags: Sequence[str], map_name: Optional[str],
                 provenance: Union[None, Provenance, Mapping[str, Any]], use_case: Optional[str]) -> Sidecar:
     """The sidecar of a new entry, checked (:class:`~scenario_bank.errors.BankError` naming what is wrong): the
@@ -338,7 +340,7 @@ def new_sidecar(script: str, description: str, name: Optional[str], elements: Op
     if not NEW_ENTRY_NAME.match(name):
         raise BankError(f"invalid scenario name {name!r}: use lowercase letters, digits, '_' or '-'")
     try:
-        elements = normalize_elements(elements or {})
+        elements = Elements.from_dict(elements or {})
     except ElementError as error:
         raise BankError(f"invalid elements: {error}") from None
     source = new_provenance(provenance)

@@ -37,7 +37,7 @@ import unicodedata
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple, Union
 
-from scenario_bank.elements import ElementError, normalize_elements
+from scenario_bank.elements import ElementError, Elements
 from scenario_bank.errors import BankVersionError, DV2SError
 from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_relative_path
 from scenario_bank.story import StoryError, normalize_story
@@ -126,12 +126,12 @@ def _is_number(value: Any) -> bool:
 
 def _json_object(value: Any) -> Any:
     """``value``, a record as its JSON object (what a record's JSON object field holds)."""
-    return value.to_dict() if isinstance(value, JsonRecord) else value
+    return value.to_dict() if isinstance(value, (JsonRecord, Elements)) else value
 
 
 def _is_object(value: Any) -> bool:
     """Whether ``value`` is a JSON object, or a record (whose JSON object is one)."""
-    return isinstance(value, (Mapping, JsonRecord))
+    return isinstance(value, (Mapping, JsonRecord, Elements))
 
 
 _CHECKS = {
@@ -380,7 +380,7 @@ class JsonRecord:
                 if key in nulls:
                     out[key] = None
                 continue
-            if isinstance(value, JsonRecord):
+            if isinstance(value, (JsonRecord, Elements)):
                 value = value.to_dict()
             elif key in self._ITEMS:
                 value = _items_json(value)
@@ -496,7 +496,7 @@ class Provenance(JsonRecord):
 
 @dataclass(frozen=True, eq=False)
 class Sidecar(JsonRecord):
-    """A bank entry's ``meta.json``: ``description`` (natural language), ``elements`` (road, participants,
+    """A bank entry's ``meta.json``: ``description`` (natural language), ``elements`` (:class:`~scenario_bank.elements.Elements`: road, participants,
     actions, relations), optional ``story`` (the phases of the scenario), ``tags``, ``map``, ``use_case``,
     its provenance ``source`` (:class:`Provenance`), the script's ``content_hash``, the entry ``name`` and the
     format's ``schema_version``. Other keys are kept in ``extra``.
@@ -508,7 +508,7 @@ class Sidecar(JsonRecord):
     schema_version: Optional[int] = None
     name: Optional[str] = None
     description: str = ""
-    elements: Optional[Mapping[str, Any]] = None
+    elements: Optional[Elements] = None
     story: Optional[Any] = None
     tags: Tuple[str, ...] = ()
     map: str = ""
@@ -519,6 +519,7 @@ class Sidecar(JsonRecord):
     null_fields: Optional[FrozenSet[str]] = None
 
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("description", "map")
+    _KIND_OVERRIDES: ClassVar[Dict[str, Optional[str]]] = {"elements": "object"}
     _WHAT: ClassVar[str] = "sidecar"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -551,7 +552,7 @@ class Sidecar(JsonRecord):
     @classmethod
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
         try:
-            normalize_elements(data.get("elements") or {})
+            elements = Elements.from_dict(data.get("elements") or {})
         except ElementError as error:
             raise RecordError(f"sidecar elements: {error}") from None
         if "story" in data:
@@ -572,7 +573,14 @@ class Sidecar(JsonRecord):
                     raise RecordError(f"sidecar field '{where}.{ENTRY_FILES}' names {str(file)[:80]!r}, which is not "
                                       "a file inside the entry folder: list relative paths of letters, digits, '_', "
                                       "'-', '.' and '/' only (no '..', not absolute)")
-        return {}
+        return {"elements": elements} if data.get("elements") is not None else {}
+
+    @classmethod
+    def from_checked(cls, data: Mapping[str, Any]) -> "Sidecar":
+        record = super().from_checked(data)
+        if record.elements is None:
+            return record
+        return record.replace(elements=Elements.from_dict(record.elements))
 
     @property
     def provenance(self) -> Provenance:

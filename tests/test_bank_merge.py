@@ -3,6 +3,7 @@ bank at once."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import multiprocessing
 import shutil
@@ -10,12 +11,13 @@ import shutil
 import pytest
 
 from scenario_bank.bank import BANK_DIR, WRITERS_LOCK, Bank, near_duplicate, param_ranges
+from scenario_bank.elements import Elements
 from scenario_bank.records import Provenance, Sidecar
 from scenario_bank.sandbox import verify_script
 
 BASE = "highway_lead_vehicle_stopped"
 SCRIPT = (BANK_DIR / BASE / "scenario.scenic").read_text(encoding="utf-8")
-ELEMENTS = json.loads((BANK_DIR / BASE / "meta.json").read_text(encoding="utf-8"))["elements"]
+ELEMENTS = Elements.from_dict(json.loads((BANK_DIR / BASE / "meta.json").read_text(encoding="utf-8"))["elements"])
 GAP = "param stopped_gap = Range(60, 120)"
 assert GAP in SCRIPT
 
@@ -43,7 +45,7 @@ def test_near_duplicate_needs_same_map_elements_and_overlapping_ranges():
     assert near_duplicate(ELEMENTS, "highway_straight", A, ELEMENTS, "highway_straight", A_NEAR)
     assert not near_duplicate(ELEMENTS, "highway_straight", A, ELEMENTS, "highway_straight", B)
     assert not near_duplicate(ELEMENTS, "highway_straight", A, ELEMENTS, "highway_two_way", A_NEAR)
-    other = {**ELEMENTS, "actions": [["car", "stop"], ["car", "brake"]]}
+    other = dataclasses.replace(ELEMENTS, actions=(("car", "stop"), ("car", "brake")))
     assert not near_duplicate(ELEMENTS, "highway_straight", A, other, "highway_straight", A_NEAR)
     # touching intervals overlap; parameters only one script has do not matter
     assert near_duplicate(ELEMENTS, "m", variant(60, 100), ELEMENTS, "m", variant(100, 130) + "\nparam z = Range(0, 1)\n")

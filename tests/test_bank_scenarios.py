@@ -37,7 +37,7 @@ if str(ROOT) not in sys.path:  # allow plain `pytest` from any folder
     sys.path.insert(0, str(ROOT))
 
 from scenario_bank import BANK_DIR, list_scenarios  # noqa: E402
-from scenario_bank.elements import PARTICIPANTS, normalize_elements  # noqa: E402
+from scenario_bank.elements import PARTICIPANTS, Elements  # noqa: E402
 from scenario_bank.maps import list_maps, resolve_map  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("in_process_simulator")
@@ -118,7 +118,7 @@ def test_sidecar_is_valid(name):
     assert meta["name"] == name
     assert isinstance(meta["description"], str) and 20 <= len(meta["description"]) <= 400
     # elements follow the vocabulary, are stored in canonical form and have an ego
-    assert normalize_elements(meta["elements"]) == meta["elements"]
+    assert Elements.from_dict(meta["elements"]).to_dict() == meta["elements"]
     # the story names actors the script names, of kinds the elements list
     from scenario_bank.story import normalize_story
 

@@ -38,7 +38,7 @@ def behaviour() -> Dict[str, Dict[str, str]]:
     for clip in _clips():
         analysis = analyze_bev_file(clip)
         record[f"{clip.parent.name}/{clip.name}"] = {"description": digest(analysis.description),
-                                                     "elements": digest(analysis.elements)}
+                                                     "elements": digest(analysis.elements.to_dict())}
     return record
 
 

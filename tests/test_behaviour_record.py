@@ -42,10 +42,10 @@ def behaviour() -> Dict[str, Dict[str, str]]:
     """The digests of what the parser and the rules SG make of every shipped description."""
     record = {}
     for name, text in _descriptions().items():
-        row = {"elements": _digest(elements_from_text(text))}
+        row = {"elements": _digest(elements_from_text(text).to_dict())}
         for seed in SEEDS:
             result = generate_rules(text, seed=seed)
-            row[f"seed{seed}"] = _digest([result.script, list(result.warnings), result.elements])
+            row[f"seed{seed}"] = _digest([result.script, list(result.warnings), result.elements.to_dict()])
         record[name] = row
     return record
 

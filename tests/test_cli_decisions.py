@@ -19,6 +19,7 @@ from dv2s_gym.pipeline.stages import Description, Generation
 from dv2s_gym.pipeline.prompts import CAMERA_VIEWPOINTS
 from dv2s_gym.story import UnknownEgoError, check_stories
 from envs.trace import saved_file_schema
+from scenario_bank.elements import Elements
 from scenario_bank.errors import UnknownScenarioError
 
 CLI = Path(build_parser.__code__.co_filename).parent
@@ -34,9 +35,9 @@ def _choices(argv, option):
 
 def _conversion(elements, warnings=(), ok=True, sp=0.5):
     return ConversionReport(
-        description=Description("a text", elements, backend="user"),
+        description=Description("a text", Elements.from_dict(elements), backend="user"),
         generation=Generation("script", "rules", warnings=list(warnings),
-                              intended_elements={"participants": ["ego"], "actions": []}),
+                              intended_elements=Elements(participants=("ego",))),
         check=ScenarioCheck(safe=True, compiled=True, sampled=True, ran=ok), sp=sp, files=["report.json"])
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from dv2s_gym.pipeline.evaluate import collect_items
 from dv2s_gym.pipeline.labels import LABEL_SUFFIX, read_label
-from scenario_bank.elements import PARTICIPANTS, normalize_elements
+from scenario_bank.elements import PARTICIPANTS, Elements
 
 FOLDER = Path(__file__).resolve().parents[1] / "dv2s_gym" / "evalset" / "descriptions"
 GROUPS = {"nhtsa_typology", "crash_report", "test_protocol", "engineer_notes", "benchmark_prompt"}
@@ -29,7 +29,7 @@ def test_every_description_has_a_label_and_back():
 @pytest.mark.parametrize("path", sorted(FOLDER.glob(f"*{LABEL_SUFFIX}")), ids=lambda p: p.name)
 def test_label_is_valid_and_consistent(path):
     data = json.loads(path.read_text(encoding="utf-8"))
-    elements = normalize_elements(data["elements"])
+    elements = Elements.from_dict(data["elements"])
     assert data["use_case"] in GROUPS
     participants = elements["participants"]
     assert participants.count("ego") == 1

@@ -21,7 +21,7 @@ from dv2s_gym.pipeline.dra.bev import BevAnalysis, NotBirdsEyeError, analyze_bev
 from dv2s_gym.pipeline.metrics import hallucination_rate, scs  # noqa: E402
 from dv2s_gym.pipeline.video import VideoClip, read_video  # noqa: E402
 from envs.recording import VideoWriter  # noqa: E402
-from scenario_bank.elements import element_set, normalize_elements  # noqa: E402
+from scenario_bank.elements import Elements, element_set  # noqa: E402
 
 SCS_MIN, HR_MAX = 0.9, 0.1
 
@@ -171,7 +171,7 @@ def test_synthetic_lead_vehicle_brakes():
     result = analyze_bev(_clip(_highway_lead_brakes()))
     assert isinstance(result, BevAnalysis)
     e = result.elements
-    assert e == normalize_elements(e)
+    assert isinstance(e, Elements) and e == Elements.from_dict(e.to_dict())
     assert e["road"] == "highway"
     assert e["participants"] == ["car", "ego"]
     assert ["car", "brake"] in e["actions"]
@@ -318,11 +318,11 @@ def _bank_file(name: str, *candidates: str) -> Optional[Path]:
     return None
 
 
-def _ground_truth(name: str) -> Dict:
+def _ground_truth(name: str) -> Elements:
     sidecar = _bank_file(name, "{name}/meta.json", "{name}.json")
     data = json.loads(sidecar.read_text(encoding="utf-8")) if sidecar else {}
     assert data.get("elements"), f"the sidecar of {name} has no ground-truth elements"
-    return normalize_elements(data["elements"])
+    return Elements.from_dict(data["elements"])
 
 
 def _record_bank_episode(name: str, seed: int, path: Path, seconds: float, size: int) -> dict:

@@ -10,7 +10,7 @@ from dv2s_gym.pipeline.evaluate import EVALSET_DIR, collect_items, evaluate, for
 from dv2s_gym.pipeline.labels import LabelError, read_label
 from dv2s_gym.pipeline.metrics import semantic_preservation
 from dv2s_gym.pipeline.semantics.text import elements_from_text
-from scenario_bank.elements import normalize_elements
+from scenario_bank.elements import Elements
 
 # The pipeline issue's example label, in the flat format.
 FLAT = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "brake"]],
@@ -26,7 +26,7 @@ def _write(folder: Path, name: str, data) -> Path:
 def test_flat_and_nested_labels_read_the_same(tmp_path):
     flat = read_label(_write(tmp_path, "a.label.json", FLAT))
     nested = read_label(_write(tmp_path, "b.label.json", {"use_case": "brakes", "elements": FLAT}))
-    assert flat.elements == nested.elements == normalize_elements(FLAT)
+    assert flat.elements == nested.elements == Elements.from_dict(FLAT)
     assert (flat.format, nested.format) == ("flat", "nested")
     assert nested.use_case == "brakes" and flat.use_case is None
     with_meta = read_label(_write(tmp_path, "c.label.json", {**FLAT, "use_case": "u", "description": "d"}))
@@ -38,9 +38,9 @@ def test_flat_label_in_an_eval_folder_and_beside_a_video(tmp_path):
     _write(tmp_path, "clip.label.json", FLAT)
     (tmp_path / "clip.webm").write_bytes(b"")
     (item,) = collect_items(tmp_path)
-    assert item.elements == normalize_elements(FLAT) and item.video.endswith("clip.webm")
+    assert item.elements == Elements.from_dict(FLAT) and item.video.endswith("clip.webm")
     assert item.use_case == "unlabeled"
-    assert label_for(tmp_path / "clip.webm") == normalize_elements(FLAT)
+    assert label_for(tmp_path / "clip.webm") == Elements.from_dict(FLAT)
 
 
 @pytest.mark.parametrize("content, message", [
@@ -76,7 +76,7 @@ def sg_report(tmp_path_factory):
     source = read_label(EVALSET_DIR / "highway_lead_vehicle_brakes_seed0.label.json")
     folder = tmp_path_factory.mktemp("sg_eval")
     _write(folder, "real.label.json", {"use_case": "real", "description": source.description,
-                                       "elements": source.elements})
+                                       "elements": source.elements.to_dict()})
     _write(folder, "nonsense.label.json", {**NONSENSE, "use_case": "nonsense", "description": source.description})
     _write(folder, "free.txt", source.description)
     report = evaluate("sg", folder, progress=False)
@@ -99,7 +99,7 @@ def test_eval_sg_with_nonsense_labels_drops(sg_report):
     # same description, so the same script ran; only the labels differ
     assert nonsense["detail"]["simulated"] == real["detail"]["simulated"]
     assert nonsense["metrics"]["SP"] == pytest.approx(
-        semantic_preservation(normalize_elements(NONSENSE), nonsense["detail"]["simulated"]))
+        semantic_preservation(Elements.from_dict(NONSENSE), nonsense["detail"]["simulated"]))
     assert nonsense["metrics"]["SP"] < real["metrics"]["SP"] - 0.3
 
 

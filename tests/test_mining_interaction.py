@@ -15,6 +15,7 @@ from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from envs.trace import EpisodeTrace
 from scenario_bank.records import Failure
+from scenario_bank.elements import Elements
 
 DT = 0.2  # the env's default policy frequency, 5 Hz
 LANE = 4.0
@@ -129,20 +130,20 @@ def test_a_run_without_the_braking_car_does_not_show_the_interaction():
 
 def test_a_lane_change_to_either_side_shows_a_cut_in_but_braking_does_not():
     interaction = failure_interaction(cut_in_with_large_gap(), CUT_IN)
-    mirrored = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "lane_change_left"]],
-                "relations": []}
-    braking = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "brake"]], "relations": []}
+    mirrored = Elements("highway", ("ego", "car"), (("car", "lane_change_left"),))
+    braking = Elements("highway", ("ego", "car"), (("car", "brake"),))
     assert shows_interaction(interaction, mirrored)
     assert not shows_interaction(interaction, braking)
-    truck = {**mirrored, "participants": ["ego", "truck"], "actions": [["truck", "cut_in"]]}
+    truck = Elements("highway", ("ego", "truck"), (("truck", "cut_in"),))
     assert not shows_interaction(interaction, truck)
 
 
 def test_a_collision_is_shown_only_with_the_kind_colliding():
     interaction = {"failure_type": "collision", "kind": "car", "manoeuvres": ["stop"]}
-    stopped = {"participants": ["ego", "car"], "actions": [["car", "stop"]]}
+    stopped = Elements(participants=("ego", "car"), actions=(("car", "stop"),))
     assert not shows_interaction(interaction, stopped)
-    assert shows_interaction(interaction, {**stopped, "actions": [["car", "stop"], ["car", "collide"]]})
+    assert shows_interaction(interaction, Elements(participants=("ego", "car"),
+                                                   actions=(("car", "stop"), ("car", "collide"))))
 
 
 @pytest.mark.parametrize("failure", [Failure("collision", with_="lead", step=10),

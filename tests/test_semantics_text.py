@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from dv2s_gym.pipeline.semantics.text import elements_from_text, parse_description
-from scenario_bank.elements import element_set, normalize_elements
+from scenario_bank.elements import Elements, element_set
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenario_bank" / "scenarios"
@@ -82,12 +82,12 @@ NONSENSE = ["", "Lorem ipsum dolor sit amet.", "The quick brown fox jumps over t
 
 @pytest.mark.parametrize("text", list(PAPER))
 def test_paper_descriptions_give_the_expected_elements(text):
-    assert elements_from_text(text) == normalize_elements(PAPER[text])
+    assert elements_from_text(text) == Elements.from_dict(PAPER[text])
 
 
 @pytest.mark.parametrize("text,expected", VARIED, ids=[t[:40] for t, _ in VARIED])
 def test_varied_phrasings(text, expected):
-    assert elements_from_text(text) == normalize_elements(expected)
+    assert elements_from_text(text) == Elements.from_dict(expected)
 
 
 @pytest.mark.parametrize("text", NONSENSE)

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from dv2s_gym.pipeline.sg.rules import SGResult, generate_rules
-from scenario_bank.elements import element_set, normalize_elements
+from scenario_bank.elements import Elements, element_set
 from scenario_bank.safety import check_script
 
 pytestmark = pytest.mark.usefixtures("in_process_simulator")
@@ -99,7 +99,7 @@ def test_generated_script_is_safe_compiles_samples_and_runs(description):
     for section in ("# 1. Map and global parameters", "# 2. Adversarial behaviours", "# 3. Road geometry",
                     "# 4. Spawn positions"):
         assert section in result.script
-    normalize_elements(result.elements)
+    assert isinstance(result.elements, Elements)
     compiled = compile_scenario(result.script, name="sg_rules_test")
     for seed in range(6):
         compiled.sample(seed)  # every seed samples a scene (sampling speed is in bench/)

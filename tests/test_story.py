@@ -11,11 +11,12 @@ import pytest
 from dv2s_gym.story import ego_collisions, required_elements, story_problem
 from policies.baselines import IDMEgo, KeepLaneEgo
 from policies.rule_based import FASTER, IDLE, SLOWER
+from scenario_bank.elements import Elements
 
-STORY = {
+STORY = Elements.from_dict({
     "actions": [["car", "go_straight"], ["ego", "turn_left"]],
     "relations": [["car", "crossing_path", "ego"], ["car", "oncoming", "ego"]],
-}
+})
 
 
 def test_ego_actions_are_required_only_of_the_scripts_own_ego():
@@ -26,16 +27,16 @@ def test_ego_actions_are_required_only_of_the_scripts_own_ego():
 
 
 def test_story_problem_names_what_is_missing():
-    shown = {"actions": [["car", "go_straight"]], "relations": [["car", "oncoming", "ego"]]}
+    shown = Elements(actions=(("car", "go_straight"),), relations=(("car", "oncoming", "ego"),))
     assert story_problem(STORY, shown, "idm") == "missing car crossing_path ego"
-    shown["relations"].append(["car", "crossing_path", "ego"])
+    shown = Elements(actions=shown.actions, relations=shown.relations + (("car", "crossing_path", "ego"),))
     assert story_problem(STORY, shown, "idm") is None
     assert story_problem(STORY, shown, "scenic") == "missing ego turn_left"
 
 
 def test_a_collision_with_a_story_actor_counts_but_not_with_a_bystander():
-    assert story_problem(STORY, {}, "rule", ego_hit=["car"]) is None
-    assert story_problem(STORY, {}, "rule", ego_hit=["pedestrian"]) is not None
+    assert story_problem(STORY, Elements(), "rule", ego_hit=["car"]) is None
+    assert story_problem(STORY, Elements(), "rule", ego_hit=["pedestrian"]) is not None
 
 
 def test_ego_collisions_reads_the_kinds_of_what_the_ego_hit():

@@ -71,7 +71,6 @@ def build_evalset(out: str | os.PathLike, scenarios: Optional[Sequence[str]] = N
     from bench.evalsets.make_bev_clips import render_clip
     from dv2s_gym.pipeline.semantics.trace import elements_from_trace
     from scenario_bank.bank import Bank
-    from scenario_bank.elements import normalize_elements
 
     bank = Bank()
     names = list(scenarios) if scenarios else [e.name for e in bank.list()]
@@ -82,14 +81,14 @@ def build_evalset(out: str | os.PathLike, scenarios: Optional[Sequence[str]] = N
     bar = tqdm(total=len(names) * per_scenario, desc="evalset", unit="clip", disable=not progress)
     for name in names:
         entry = bank.get(name)
-        label = normalize_elements(entry.elements)
+        label = entry.elements.to_dict()
         kept[name], differs[name] = [], []
         length = CLIP_SECONDS.get(name, seconds)
         policy = _ego_driver(entry, label)
         for seed in range(per_scenario):
             stem = f"{name}_seed{seed}"
             summary = render_clip(name, seed, out / f"{stem}.webm", seconds=length, size=size, ego_policy=policy)
-            problem = story_problem(label, elements_from_trace(summary["trace"]))
+            problem = story_problem(label, elements_from_trace(summary["trace"]).to_dict())
             if problem:
                 differs[name].append(f"seed {seed} ({policy} ego): {problem}")
             record = {"use_case": entry.sidecar.use_case or name, "scenario": name, "seed": seed,

@@ -643,7 +643,7 @@ def build(out: str | os.PathLike, only: Optional[Sequence[str]] = None) -> List[
 
     Raises RuntimeError naming the clip when a scripted event did not happen.
     """
-    from scenario_bank.elements import normalize_elements
+    from scenario_bank.elements import Elements
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -658,7 +658,7 @@ def build(out: str | os.PathLike, only: Optional[Sequence[str]] = None) -> List[
                 raise RuntimeError(f"{stem}: {result['problem']}; fix the script in make_external_evalset.py")
             label = {"use_case": script.use_case, "script": script.name, "variant": k, "env": script.env_id,
                      "seconds": script.seconds, "source": "stock highway-env, scripted and labelled by hand",
-                     "description": script.description, "elements": normalize_elements(script.elements)}
+                     "description": script.description, "elements": Elements.from_dict(script.elements).to_dict()}
             if (script.scaling, tuple(script.size), script.stock_traffic) != (SCALING, (SIZE, SIZE), 0):
                 label["render"] = {"scaling": script.scaling, "screen": list(script.size),
                                    "stock_traffic": script.stock_traffic}

@@ -11,7 +11,7 @@ from bench.evalsets import make_external_evalset as m
 from bench.evalsets.make_external_evalset import EXTERNAL_EVALSET_DIR, SCRIPTS, VARIANTS, Scene, Script, \
     render_script
 from dv2s_gym.pipeline.evaluate import VIDEO_SUFFIXES, collect_items
-from scenario_bank.elements import normalize_elements
+from scenario_bank.elements import Elements
 
 
 def test_every_clip_has_its_hand_written_label():
@@ -24,7 +24,7 @@ def test_every_clip_has_its_hand_written_label():
         item = by_stem[stem]
         assert item.video and item.video.endswith(".webm"), stem
         label = json.loads((EXTERNAL_EVALSET_DIR / f"{stem}.label.json").read_text(encoding="utf-8"))
-        assert label["elements"] == normalize_elements(script.elements), stem
+        assert label["elements"] == Elements.from_dict(script.elements).to_dict(), stem
         assert label["description"] == script.description and label["use_case"] == script.use_case
         assert label["env"] == script.env_id in ("highway-v0", "merge-v0", "intersection-v0", "roundabout-v0")
     # every video has a label, and the folder holds nothing but videos, labels and the README

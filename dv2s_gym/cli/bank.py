@@ -119,7 +119,7 @@ def run_show(args: argparse.Namespace) -> int:
     sidecar = _keys_sorted(entry.sidecar.to_dict())
     data = {**sidecar, "path": str(entry.script_path), "script": entry.script, "files": files}
     human = (f"{entry.name}  ({entry.map}, {entry.source.kind})\n{entry.description}\n"
-             f"tags: {', '.join(entry.tags)}\nelements: {json.dumps(entry.elements)}\n"
+             f"tags: {', '.join(entry.tags)}\nelements: {json.dumps(entry.elements.to_dict())}\n"
              f"source: {json.dumps(sidecar['source'])}\npath: {entry.script_path}\n"
              + "".join(f"file: {f}\n" for f in files) + f"\n{entry.script}")
     emit(args, data, human)

@@ -69,7 +69,7 @@ def run_describe(args: argparse.Namespace) -> int:
     """``dv2s describe``: the video's description and its elements."""
     result = describe(args.video, backend=args.dra, camera=args.camera, question=args.question, fps=args.fps,
                       max_frames=args.max_frames, max_pixels=args.max_pixels, llm_config=llm_config(args))
-    emit(args, result.as_dict(), f"{result.text}\n\nelements: {json.dumps(result.elements)}")
+    emit(args, result.as_dict(), f"{result.text}\n\nelements: {json.dumps(result.elements.to_dict())}")
     return 0
 
 

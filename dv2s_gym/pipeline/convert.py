@@ -31,6 +31,7 @@ from scenario_bank.sandbox import SandboxError, verify_script
 from dv2s_gym.pipeline.labels import label_path_for, read_label
 from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
 from scenario_bank.bank import Bank, Provenance, Sidecar
+from scenario_bank.elements import Elements
 
 __all__ = ["ConversionReport", "ConvertSettings", "ScenarioCheck", "UNPLACED_WARNING", "add_converted",
            "check_scenario", "checks_passed", "classify_failure", "generated", "placed_nothing", "conversion_provenance", "convert_video",
@@ -48,12 +49,28 @@ class ScenarioCheck:
     ran: bool = False
     error: Optional[str] = None
     failure_category: Optional[str] = None
-    simulated_elements: Dict[str, Any] = field(default_factory=dict)
+    simulated_elements: Optional[Elements] = None
+    """What the simulated run showed (``None``: it did not run; written as ``{}``)."""
     episode: Dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
         return self.safe and self.compiled and self.sampled and self.ran
+
+    def to_json(self) -> Dict[str, Any]:
+        """The check as a conversion's ``report.json`` holds it, with ``ok``."""
+        data = asdict(self)
+        data["simulated_elements"] = {} if self.simulated_elements is None else self.simulated_elements.to_dict()
+        data["ok"] = self.ok
+        return data
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> "ScenarioCheck":
+        """The check :meth:`to_json` wrote."""
+        values = {key: value for key, value in data.items() if key != "ok"}
+        simulated = values.get("simulated_elements")
+        values["simulated_elements"] = Elements.from_dict(simulated) if simulated else None
+        return cls(**values)
 
 
 def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview: Optional[Path] = None,
@@ -114,7 +131,7 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
     return check
 
 
-def label_for(video: Path) -> Optional[Dict[str, Any]]:
+def label_for(video: Path) -> Optional[Elements]:
     """Ground-truth elements stored beside a video as ``<video stem>.label.json`` (either label
     format, see :mod:`dv2s_gym.pipeline.labels`), if any; a malformed label raises ``LabelError``."""
     path = label_path_for(video)
@@ -175,7 +192,7 @@ class ConversionReport:
         elif self.generation is not None:
             data["generation"] = self.generation.as_dict()
         if self.check is not None:
-            data["check"] = {**asdict(self.check), "ok": self.check.ok}
+            data["check"] = self.check.to_json()
         for key in ("sp", "e2e_sc"):
             if getattr(self, key) is not None:
                 data[key] = getattr(self, key)
@@ -195,7 +212,7 @@ class ConversionReport:
                    generation=None if failed or not generation else Generation.from_dict(generation),
                    generation_error=generation.get("error") if failed else None,
                    generation_error_category=generation.get("category") if failed else None,
-                   check=None if check is None else ScenarioCheck(**{k: v for k, v in check.items() if k != "ok"}),
+                   check=None if check is None else ScenarioCheck.from_json(check),
                    sp=data.get("sp"), e2e_sc=data.get("e2e_sc"), seconds=data.get("seconds", 0.0),
                    files=list(data.get("files") or []), seconds_total=data.get("seconds_total"))
 
@@ -209,7 +226,7 @@ def _write(folder: Path, name: str, text: str) -> None:
 
 
 def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
-                       llm_config: LLMConfigLike = None, labels: Optional[Dict[str, Any]] = None,
+                       llm_config: LLMConfigLike = None, labels: Optional[Elements] = None,
                        seconds: float = 10.0, started: Optional[float] = None) -> ConversionReport:
     """SG + validation for a description; writes the folder's files (:data:`OUTPUT_FILES`) and returns the report.
     ``started``: the :func:`time.perf_counter` at which the whole conversion began (the report's ``seconds_total``
@@ -220,14 +237,14 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
     """
     with staged_folder(out, OUTPUT_FILES) as stage:
         _write(stage, "description.txt", description.text.strip() + "\n")
-        _write(stage, "elements.json", json.dumps(description.elements, indent=2) + "\n")
+        _write(stage, "elements.json", json.dumps(description.elements.to_dict(), indent=2) + "\n")
         report = _generate_in(stage, description, sg=sg, seed=seed, llm_config=llm_config, labels=labels,
                               seconds=seconds, started=started)
     return report
 
 
 def _generate_in(stage: Path, description: Description, *, sg: str, seed: int, llm_config: LLMConfigLike,
-                 labels: Optional[Dict[str, Any]], seconds: float, started: Optional[float]) -> ConversionReport:
+                 labels: Optional[Elements], seconds: float, started: Optional[float]) -> ConversionReport:
     """:func:`generate_to_folder`'s work, its files written in ``stage``."""
     start = time.perf_counter()
     results: Dict[str, Any] = {}
@@ -264,12 +281,11 @@ def checks_passed(report: ConversionReport) -> bool:
 def placed_nothing(report: ConversionReport) -> bool:
     """Whether neither the description's elements nor the generated script hold anything but the ego: every
     phrase was left out (a partial description, with warnings, still counts as generated)."""
-    described = report.description.elements or {}
-    intended = (report.generation.intended_elements if report.generation is not None else None) or {}
-    if report.generation_error is not None or not intended:
+    described = report.description.elements
+    intended = report.generation.intended_elements if report.generation is not None else None
+    if report.generation_error is not None or intended is None:
         return False
-    return (not any(described.get(key) for key in ("road", "participants", "actions", "relations"))
-            and set(intended.get("participants") or []) <= {"ego"} and not intended.get("actions"))
+    return (described in (None, Elements()) and set(intended.participants) <= {"ego"} and not intended.actions)
 
 
 def generated(report: ConversionReport) -> bool:

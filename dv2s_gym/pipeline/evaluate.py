@@ -34,6 +34,7 @@ from dv2s_gym.pipeline.metrics import e2e_sc, hallucination_rate, mean_sd, scs, 
 from dv2s_gym.pipeline.convert import check_scenario
 from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.stages import describe, generate
+from scenario_bank.elements import Elements
 from scenario_bank.errors import MissingFileError, SettingError
 
 __all__ = ["EvalItem", "EVALSET_DIR", "EVALSETS", "evalset_folder", "collect_items", "evaluate", "format_results", "VIDEO_SUFFIXES"]
@@ -60,7 +61,7 @@ class EvalItem:
 
     stem: str
     use_case: str
-    elements: Optional[Dict[str, Any]]
+    elements: Optional[Elements]
     video: Optional[str] = None
     description: Optional[str] = None
 
@@ -139,8 +140,10 @@ def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: LL
                 generation.note_simulated(check.simulated_elements)
             result.ok = check.ok
             result.detail.update({"warnings": generation.warnings, "failures": generation.failure_counts(),
-                                  "check_error": check.error, "simulated": check.simulated_elements})
-            simulated = check.simulated_elements if check.ran else {}
+                                  "check_error": check.error,
+                                  "simulated": {} if check.simulated_elements is None
+                                  else check.simulated_elements.to_dict()})
+            simulated = (check.simulated_elements if check.ran else None) or Elements()
             if stage == "sg":
                 result.metrics = {"SP": semantic_preservation(described, simulated)}
             else:

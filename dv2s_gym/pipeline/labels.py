@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, Dict, Optional
 
 from dv2s_gym.pipeline.errors import PipelineError
-from scenario_bank.elements import ElementError, normalize_elements
+from scenario_bank.elements import ElementError, Elements
 
 __all__ = ["Label", "LabelError", "LABEL_SUFFIX", "read_label", "label_path_for"]
 
@@ -41,10 +41,10 @@ class LabelError(PipelineError, ValueError):
 
 @dataclass
 class Label:
-    """A read label: its canonical elements and optional metadata."""
+    """A read label: its elements and optional metadata."""
 
     path: Path
-    elements: Dict[str, Any]
+    elements: Elements
     use_case: Optional[str] = None
     description: Optional[str] = None
     format: str = "nested"
@@ -78,7 +78,7 @@ def read_label(path: str | Path) -> Label:
         raise LabelError(f"label file {path} has no elements (no 'elements' and none of {list(ELEMENT_FIELDS)}); "
                          f"a label is {_FORMATS}")
     try:
-        elements = normalize_elements(elements)
+        elements = Elements.from_dict(elements)
     except (ElementError, TypeError) as error:
         raise LabelError(f"label file {path}: {error}; a label is {_FORMATS}") from None
     for key in ("use_case", "description"):

@@ -5,7 +5,8 @@
 * SP = |S_de ∩ S_sc| / |S_de|: how much of a description the simulated scenario preserves.
 * E2E-SC = |GT_v ∩ S_o| / |GT_v|: how much of a video's ground truth survives the pipeline.
 
-Each takes element records (the JSON format) or element sets. Empty denominators
+Each takes element records (:class:`~scenario_bank.elements.Elements`, or their JSON objects as label files hold
+them) or element sets. Empty denominators
 follow the convention that nothing to cover is fully covered (1.0) and nothing
 said hallucinates nothing (HR 0.0).
 """
@@ -15,42 +16,43 @@ from __future__ import annotations
 import statistics
 from typing import Any, Dict, FrozenSet, Iterable, List, Mapping, Union
 
-from scenario_bank.elements import element_set, with_undirected
+from scenario_bank.elements import Elements, element_set, with_undirected
 
 __all__ = ["scs", "hallucination_rate", "semantic_preservation", "e2e_sc", "mean_sd", "as_set"]
 
-Elements = Union[Mapping[str, Any], FrozenSet, set]
+ElementsLike = Union[Elements, Mapping[str, Any], FrozenSet, set]
+"""What the metrics score: an element record, its JSON object or an element set."""
 
 
-def as_set(elements: Elements) -> FrozenSet:
+def as_set(elements: ElementsLike) -> FrozenSet:
     """An element set from a record or a set."""
     if isinstance(elements, (set, frozenset)):
         return frozenset(elements)
     return element_set(elements)
 
 
-def _recall(reference: Elements, candidate: Elements) -> float:
+def _recall(reference: ElementsLike, candidate: ElementsLike) -> float:
     ref, cand = as_set(reference), with_undirected(as_set(candidate))
     return len(ref & cand) / len(ref) if ref else 1.0
 
 
-def scs(ground_truth: Elements, description: Elements) -> float:
+def scs(ground_truth: ElementsLike, description: ElementsLike) -> float:
     """Semantic Coverage Score: recall of ground-truth elements in the description."""
     return _recall(ground_truth, description)
 
 
-def hallucination_rate(ground_truth: Elements, description: Elements) -> float:
+def hallucination_rate(ground_truth: ElementsLike, description: ElementsLike) -> float:
     """Hallucination Rate: share of described elements absent from the ground truth."""
     gt, desc = with_undirected(as_set(ground_truth)), as_set(description)
     return 1.0 - len(gt & desc) / len(desc) if desc else 0.0
 
 
-def semantic_preservation(description: Elements, scenario: Elements) -> float:
+def semantic_preservation(description: ElementsLike, scenario: ElementsLike) -> float:
     """Semantic Preservation: recall of the description's elements in the simulated scenario."""
     return _recall(description, scenario)
 
 
-def e2e_sc(video_ground_truth: Elements, simulated: Elements) -> float:
+def e2e_sc(video_ground_truth: ElementsLike, simulated: ElementsLike) -> float:
     """End-to-End Semantic Consistency: recall of the video's ground truth in the simulated output."""
     return _recall(video_ground_truth, simulated)
 

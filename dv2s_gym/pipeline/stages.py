@@ -20,6 +20,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 from dv2s_gym.pipeline.attempts import GenerationFailure
 from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
 from dv2s_gym.pipeline.llm_config import LLMConfigLike
+from scenario_bank.elements import Elements
 from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import registering_module, remember_code
 from scenario_bank.bank import Bank
@@ -33,19 +34,24 @@ class Description:
     """What the Driving Record Analyzer said about a video."""
 
     text: str
-    elements: Dict[str, Any]
+    elements: Elements
     backend: str
     model: Optional[str] = None
     prompt_hash: Optional[str] = None
     video: Optional[str] = None
 
     def as_dict(self) -> Dict[str, Any]:
-        return asdict(self)
+        data = asdict(self)
+        data["elements"] = self.elements.to_dict()
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "Description":
         """The description :meth:`as_dict` wrote (a conversion's ``report.json``); keys it does not know are left."""
-        return cls(**{key: data[key] for key in _field_names(cls) if key in data})
+        values = {key: data[key] for key in _field_names(cls) if key in data}
+        if "elements" in values:
+            values["elements"] = Elements.from_dict(values["elements"])
+        return cls(**values)
 
 
 @dataclass
@@ -59,7 +65,9 @@ class Generation:
     attempts: int = 1
     model: Optional[str] = None
     context_hash: Optional[str] = None
-    intended_elements: Dict[str, Any] = field(default_factory=dict)
+    intended_elements: Optional[Elements] = None
+    """What the script was composed to show (the rules SG's :attr:`~dv2s_gym.pipeline.sg.rules.SGResult.elements`;
+    ``None`` from a backend that does not say: written as ``{}``)."""
 
     def failure_counts(self) -> Dict[str, int]:
         """Failures per category of the paper's taxonomy (plus unsafe code)."""
@@ -68,10 +76,10 @@ class Generation:
             counts[failure.category] = counts.get(failure.category, 0) + 1
         return counts
 
-    def note_simulated(self, simulated: Dict[str, Any]) -> List[str]:
+    def note_simulated(self, simulated: Elements) -> List[str]:
         """Add a warning for each element the script was composed to show (``intended_elements``, rules SG)
         that a simulated run of it (``simulated``, the trace's elements) did not show; returns the new ones."""
-        if not self.intended_elements:
+        if self.intended_elements is None:
             return []
         from dv2s_gym.pipeline.sg.rules import unshown_warnings
 
@@ -81,13 +89,17 @@ class Generation:
 
     def as_dict(self) -> Dict[str, Any]:
         data = asdict(self)
+        data["intended_elements"] = self.intended_elements.to_dict() if self.intended_elements is not None else {}
         data["failure_counts"] = self.failure_counts()
         return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "Generation":
         """The generation :meth:`as_dict` wrote (a conversion's ``report.json``); the counts it adds are left."""
-        return cls(**{key: data[key] for key in _field_names(cls) if key in data})
+        values = {key: data[key] for key in _field_names(cls) if key in data}
+        intended = values.get("intended_elements")
+        values["intended_elements"] = Elements.from_dict(intended) if intended else None
+        return cls(**values)
 
 
 def _field_names(record: type) -> List[str]:
@@ -179,7 +191,7 @@ def _generate_rules(description: str, *, seed: int, llm_config: LLMConfigLike,
     result = generate_rules(description, seed=seed)
     return Generation(result.script, "rules", warnings=list(result.warnings),
                       context_hash=getattr(result, "context_hash", None),
-                      intended_elements=dict(getattr(result, "elements", {}) or {}))
+                      intended_elements=result.elements)
 
 
 def _generate_openai(description: str, *, seed: int, llm_config: LLMConfigLike,

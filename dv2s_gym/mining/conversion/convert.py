@@ -65,7 +65,6 @@ import json
 import os
 import re
 import time
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Union
 
@@ -294,7 +293,7 @@ class _Conversion:
             description.elements = elements_from_text(description.text)
         self.out["description"] = description.text
         write_run_file(self.conversion / "description.txt", description.text.strip() + "\n")
-        write_run_file(self.conversion / "elements.json", json.dumps(description.elements, indent=2) + "\n")
+        write_run_file(self.conversion / "elements.json", json.dumps(description.elements.to_dict(), indent=2) + "\n")
         self.details["description"] = description.as_dict()
         self.description = description
         self.lap("describe")
@@ -316,7 +315,7 @@ class _Conversion:
 
         check = check_scenario(self.generation.script, seed=self.settings.seed,
                                name=f"mined failure {self.record.index}", in_process=False)
-        self.details["check"] = {**asdict(check), "ok": check.ok}
+        self.details["check"] = check.to_json()
         self.lap("check")
         if not check.ok:
             failed = next(s for s in ("safety", "compile", "sample", "run")
@@ -356,7 +355,7 @@ class _Conversion:
         truth = elements_from_trace(self.source_trace)
         scores = [e2e_sc(truth, elements_from_trace(trace)) for trace in self.traces]
         self.out["e2e_sc"] = float(np.mean(scores))
-        self.details["source_elements"] = truth
+        self.details["source_elements"] = truth.to_dict()
         self.lap("e2e_sc")
 
     def _judge(self) -> None:

@@ -29,7 +29,7 @@ from typing import Any, ClassVar, Dict, FrozenSet, List, Mapping, Optional, Tupl
 
 from dv2s_gym.pipeline.semantics.trace import ego_frame, elements_from_trace, trace_actor_kind
 from scenario_bank.failure_types import failure_type
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import ActorKind, Elements
 from scenario_bank.records import Failure, JsonRecord
 
 __all__ = ["MANOEUVRES", "LOOKBACK_S", "FailureInteraction", "key_actor", "actor_manoeuvres", "failure_interaction",
@@ -102,7 +102,7 @@ def actor_manoeuvres(trace, name: str) -> List[str]:
         trace, states=[{k: v for k, v in step.items() if k in keep} for step in trace.states],
         events=[e for e in trace.events if set(e.get("actors") or []) <= keep])
     kind = trace_actor_kind(trace, name)
-    found = {action for who, action in elements_from_trace(alone)["actions"] if who == kind}
+    found = {action for who, action in elements_from_trace(alone).actions if who == kind}
     return [m for m in MANOEUVRES if m in found]
 
 
@@ -168,7 +168,7 @@ def _first_seen(trace, name: str, k: int) -> Optional[Tuple[float, str]]:
     return None
 
 
-def shows_interaction(interaction: FailureInteraction, elements: Mapping[str, Any]) -> bool:
+def shows_interaction(interaction: FailureInteraction, elements: Elements) -> bool:
     """Whether simulated ``elements`` (a trace's, :func:`~dv2s_gym.pipeline.semantics.trace.elements_from_trace`)
     hold the interaction: a participant of the key actor's kind doing one of its manoeuvres (a lane change
     in either direction matches a lane change), and, for a collision, that kind colliding. An interaction
@@ -177,9 +177,9 @@ def shows_interaction(interaction: FailureInteraction, elements: Mapping[str, An
     kind = interaction.kind
     if kind is None:
         return True
-    if kind not in (elements.get("participants") or []):
+    if kind not in elements.participants:
         return False
-    actions = {action for who, action in elements.get("actions") or [] if who == kind}
+    actions = {action for who, action in elements.actions if who == kind}
     if interaction.failure_type == "collision" and "collide" not in actions:
         return False
     wanted = set(interaction.manoeuvres or ())
@@ -230,7 +230,7 @@ def _side_at_failure(trace, name: str) -> Optional[str]:
 _ARTICLE = {ActorKind.OBSTACLE: "An obstacle", ActorKind.EGO: "The ego vehicle"}
 
 
-def interaction_sentence(interaction: FailureInteraction, known: Optional[Mapping[str, Any]] = None) -> str:
+def interaction_sentence(interaction: FailureInteraction, known: Optional[Elements] = None) -> str:
     """One or two sentences naming the key actor and what it did (from the trace), for the description of a
     failure video; empty when the ego was alone. ``known``: the elements a description already states; what
     they hold (the actor's kind doing one of its manoeuvres, or, for an actor that did none, its kind where it
@@ -239,8 +239,9 @@ def interaction_sentence(interaction: FailureInteraction, known: Optional[Mappin
     kind = interaction.kind
     if kind is None:
         return ""
-    said = {action for who, action in (known or {}).get("actions") or [] if who == kind}
-    placed = {relation for who, relation, _ in (known or {}).get("relations") or [] if who == kind}
+    known = known or Elements()
+    said = {action for who, action in known.actions if who == kind}
+    placed = {relation for who, relation, _ in known.relations if who == kind}
     moves = list(interaction.manoeuvres or ())
     collided = interaction.failure_type == "collision"
     relation = {"same_lane": "same_lane", "left": "left_of", "right": "right_of"}.get(interaction.side)

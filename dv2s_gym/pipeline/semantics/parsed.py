@@ -7,7 +7,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
-from scenario_bank.elements import ActorKind, normalize_elements
+from scenario_bank.elements import ActorKind, Elements
 
 __all__ = ["Entity", "NO_JUNCTION_WORDS", "drift_side", "ParsedDescription"]
 
@@ -93,8 +93,8 @@ class ParsedDescription:
                 return i
         raise ValueError("entity not in description")
 
-    def elements(self) -> Dict[str, Any]:
-        """The semantic elements (vocabulary canonical form)."""
+    def elements(self) -> Elements:
+        """The semantic elements of the description."""
         participants: List[str] = []
         for e in self.entities:
             participants.extend([e.kind] * e.count)
@@ -105,6 +105,4 @@ class ParsedDescription:
                 if other is e:
                     continue
                 relations.add((e.kind, rel, other.kind))
-        return normalize_elements({"road": self.road, "participants": participants,
-                                   "actions": [list(a) for a in actions],
-                                   "relations": [list(r) for r in sorted(relations)]})
+        return Elements(self.road, tuple(participants), tuple(actions), tuple(sorted(relations)))

@@ -78,6 +78,7 @@ from dv2s_gym.pipeline.semantics.clauses import ClauseReader
 from dv2s_gym.pipeline.semantics.mentions import Mention, normalize, MentionReader
 from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
 from dv2s_gym.pipeline.semantics.scene_completion import SceneCompletion
+from scenario_bank.elements import Elements
 from scenario_bank.errors import WrongTypeError
 
 __all__ = ["parse_description", "elements_from_text"]
@@ -114,12 +115,12 @@ def parse_description(text: str) -> ParsedDescription:
     return _Parser(text).parse()
 
 
-def elements_from_text(text: str) -> Dict[str, Any]:
-    """The semantic elements a description states, in canonical vocabulary form.
+def elements_from_text(text: str) -> Elements:
+    """The semantic elements a description states.
 
     >>> elements_from_text("The ego car is on the highway and the car in front of it suddenly decelerates.")
     ... # doctest: +NORMALIZE_WHITESPACE
-    {'road': 'highway', 'participants': ['car', 'ego'], 'actions': [['car', 'brake']],
-     'relations': [['car', 'ahead_of', 'ego']]}
+    Elements(road='highway', participants=('car', 'ego'), actions=(('car', 'brake'),),
+             relations=(('car', 'ahead_of', 'ego'), ('car', 'same_lane', 'ego')))
     """
     return parse_description(text).elements()

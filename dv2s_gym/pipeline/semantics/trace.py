@@ -67,7 +67,7 @@ import numpy as np
 import shapely
 from shapely.affinity import scale
 
-from scenario_bank.elements import ActorKind, normalize_elements
+from scenario_bank.elements import ActorKind, Elements
 from scenario_bank.maps import MAPS_DIR
 
 __all__ = ["ego_frame", "elements_from_trace", "collision_type", "trace_actor_kind", "map_view", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
@@ -279,11 +279,11 @@ def _collision_actions(trace, event: Dict[str, Any], dt: float) -> Optional[str]
     return None
 
 
-def elements_from_trace(trace) -> Dict[str, Any]:
-    """Elements (vocabulary canonical form) of an episode: road, participants, actions, relations."""
+def elements_from_trace(trace) -> Elements:
+    """The elements of an episode: road, participants, actions, relations."""
     names = list(trace.states[0].keys()) if trace.states else []
     if "ego" not in names:
-        return normalize_elements({})
+        return Elements()
     kinds = dict(getattr(trace, "kinds", {}) or {})
     dt = _step_seconds(trace)
     tracks: Dict[str, np.ndarray] = {}
@@ -343,12 +343,7 @@ def elements_from_trace(trace) -> Dict[str, Any]:
         if own & _LEAVES_LANE:
             own.discard("keep_lane")
         actions.update((kind, a) for a in own)
-    return normalize_elements({
-        "road": road,
-        "participants": participants,
-        "actions": [list(a) for a in actions],
-        "relations": [list(r) for r in relations],
-    })
+    return Elements(road, tuple(participants), tuple(actions), tuple(relations))
 
 
 def _step_seconds(trace) -> float:

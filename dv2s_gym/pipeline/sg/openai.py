@@ -42,6 +42,7 @@ from dv2s_gym.pipeline.errors import GenerationFailedError
 from dv2s_gym.pipeline.prompts import prompt_hash, repair_message, sg_context, sg_messages
 from scenario_bank.safety import check_script, UnsafeScenarioError
 from scenario_bank.bank import Bank
+from scenario_bank.elements import Elements
 from envs.errors import SceneSamplingError
 from scenario_bank.sandbox import SandboxError, verify_script
 from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
@@ -84,7 +85,7 @@ class Example:
     name: str
     description: str
     script: str
-    elements: Dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+    elements: Elements = field(default_factory=Elements, compare=False, hash=False)
 
     @property
     def text(self) -> str:
@@ -111,7 +112,7 @@ def bank_examples(bank: Any = None) -> List[Example]:
     if bank is None or isinstance(bank, (str, os.PathLike)):
         bank = Bank(bank)
     found = [Example(entry.name, entry.description or _docstring(entry.script), entry.script,
-                     dict(entry.elements or {})) for entry in bank]
+                     entry.elements) for entry in bank]
     safe = []
     for example in found:
         if not example.description:

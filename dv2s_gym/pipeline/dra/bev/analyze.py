@@ -10,7 +10,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from scenario_bank.elements import normalize_elements
+from scenario_bank.elements import Elements
 from dv2s_gym.pipeline.dra.bev.frames import (
     BEV_READ_OPTIONS, NotBirdsEyeError, _check_birds_eye, _frames_and_times, _hsv, _mask,
 )
@@ -40,14 +40,14 @@ class BevAnalysis:
 
     Attributes:
         description: three sentences (and an answer sentence when a question was asked).
-        elements: semantic elements, canonical form of :func:`scenario_bank.elements.normalize_elements`.
+        elements: the semantic elements (:class:`scenario_bank.elements.Elements`).
         answer: the answer to the question, when one was asked and could be answered.
         tracks: actors followed across frames (ego-centred, metres), with speeds and what they did.
         debug: intermediate measurements (scale, road evidence, ego speed, timings...).
     """
 
     description: str
-    elements: Dict[str, Any]
+    elements: Elements
     answer: Optional[str] = None
     tracks: List[Dict[str, Any]] = field(default_factory=list)
     debug: Dict[str, Any] = field(default_factory=dict)
@@ -304,16 +304,15 @@ def _blocking_neighbours(actors: List[Dict[str, Any]], lane_w: float) -> None:
             a["alongside"] = True
 
 
-def _story_elements(road: Optional[str], ego_acts: set, actors: List[Dict[str, Any]]) -> Dict[str, Any]:
+def _story_elements(road: Optional[str], ego_acts: set, actors: List[Dict[str, Any]]) -> Elements:
     """The semantic elements of the story: the ego and each actor, their actions and relations to the ego."""
     participants = ["ego"] + [a["kind"] for a in actors]
-    actions = [["ego", x] for x in sorted(ego_acts)]
+    actions = [("ego", x) for x in sorted(ego_acts)]
     relations = []
     for a in actors:
-        actions.extend([a["kind"], x] for x in sorted(a["actions"]))
-        relations.extend([a["kind"], r, "ego"] for r in sorted(a["relations"]))
-    return normalize_elements({"road": road, "participants": participants, "actions": actions,
-                               "relations": relations})
+        actions.extend((a["kind"], x) for x in sorted(a["actions"]))
+        relations.extend((a["kind"], r, "ego") for r in sorted(a["relations"]))
+    return Elements(road, tuple(participants), tuple(actions), tuple(relations))
 
 
 def _track_records(tracks: List[Track], actors: List[Dict[str, Any]]) -> List[Dict[str, Any]]:

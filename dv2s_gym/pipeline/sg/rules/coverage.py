@@ -10,7 +10,7 @@ from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
 from dv2s_gym.pipeline.sg.rules.describe import COLLISION_HINTS
 from dv2s_gym.pipeline.sg.rules.roads import MAP_ROADS
 from dv2s_gym.pipeline.sg.rules.script import Script
-from scenario_bank.elements import (ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, ActorKind, element_set,
+from scenario_bank.elements import (ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, ActorKind, Elements, element_set,
                                     with_undirected)
 
 __all__ = ["check_main_event", "typed_collisions", "unbuilt_warnings", "absent_warnings", "unshown_warnings"]
@@ -79,10 +79,8 @@ def unbuilt_warnings(parsed: ParsedDescription, s: "Script", said: Sequence[str]
     composed script does not mean to show (its :attr:`Script.actions`, relations and participants), unless a
     warning in ``said`` already names it. The phrase is the text the parser read the element from (the actor's
     noun when it has none)."""
-    meant = with_undirected(element_set({"road": MAP_ROADS.get(s.frame.map),
-                                         "participants": s.participants,
-                                         "actions": [list(a) for a in s.actions],
-                                         "relations": [list(r) for r in s.relations]}))
+    meant = with_undirected(element_set(Elements(MAP_ROADS.get(s.frame.map), tuple(s.participants),
+                                                 tuple(s.actions), tuple(s.relations))))
     said_text = " ".join(w.lower().replace("_", " ") for w in said)
     phrases: Dict[Tuple, str] = {}
     for entity in parsed.entities:
@@ -139,10 +137,10 @@ def absent_warnings(parsed: ParsedDescription) -> List[str]:
     return [note]
 
 
-def unshown_warnings(meant: Dict[str, Any], simulated: Dict[str, Any]) -> List[str]:
+def unshown_warnings(meant: Optional[Elements], simulated: Optional[Elements]) -> List[str]:
     """One ``not shown in the simulated run: <element>`` warning per element the script was composed to show
     (``meant``, :attr:`SGResult.elements`) that a simulated run of it did not show (``simulated``, from
     :func:`dv2s_gym.pipeline.semantics.trace.elements_from_trace`)."""
-    shown = with_undirected(element_set(simulated or {}))
+    shown = with_undirected(element_set(simulated or Elements()))
     return [f"not shown in the simulated run: {e[0]} {_words(e)}"
-            for e in sorted(element_set(meant or {}), key=str) if e not in shown]
+            for e in sorted(element_set(meant or Elements()), key=str) if e not in shown]

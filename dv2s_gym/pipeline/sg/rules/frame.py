@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
 from dv2s_gym.pipeline.sg.rules.roles import Role
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import ActorKind, Elements
 
 __all__ = ["VEHICLES", "CLASS", "KIND_SPEEDS", "ActorFrame", "ScenarioFrame", "SGResult"]
 
@@ -60,6 +60,6 @@ class SGResult:
     script: str
     frame: ScenarioFrame
     warnings: List[str]
-    elements: Dict[str, Any]
+    elements: Elements
     backend: str = "rules"
     context_hash: str = ""
