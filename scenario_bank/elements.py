@@ -32,10 +32,9 @@ matter), ``("action", type, action)`` and ``("relation", a, rel, b)``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping as _MappingABC
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any, Dict, FrozenSet, Iterable, Iterator, List, Mapping, Optional, Tuple, Union
+from typing import Any, Dict, FrozenSet, Iterable, List, Mapping, Optional, Tuple, Union
 
 from scenario_bank.errors import DV2SError
 
@@ -111,16 +110,16 @@ _FIELDS = ("road", "participants", "actions", "relations")
 
 
 @dataclass(frozen=True)
-class Elements(_MappingABC):
+class Elements:
     """The semantic elements of one scene: its ``road`` (one of :data:`ROADS`, or ``None``), its ``participants``
     (a multiset of :data:`PARTICIPANTS`, sorted), its ``actions`` (``(participant type, action)`` pairs) and its
     ``relations`` (``(participant type, relation, participant type)`` triples), each sorted and without repeats.
 
     Built from any content (lists or tuples, in any order, with repeated actions or relations), a record holds its
     canonical form and checks it against the vocabulary (:class:`ElementError` names the offending entry), so two
-    records of the same content compare and hash equal. Its JSON object is :meth:`to_dict`; the record is also a
-    read-only mapping over it (``elements["actions"]``, lists), for code written against the files' dict form (the
-    product reads fields).
+    records of the same content compare and hash equal. It is read by its fields; its JSON object is :meth:`to_dict`
+    (a record is no mapping: ``elements["actions"]`` is a ``TypeError``). Every record is true, a record of nothing
+    too: test for one with ``== Elements()``.
     """
 
     road: Optional[str] = None
@@ -162,16 +161,6 @@ class Elements(_MappingABC):
         ``participants``, ``actions`` and ``relations`` as lists."""
         return {"road": self.road, "participants": list(self.participants),
                 "actions": [list(a) for a in self.actions], "relations": [list(r) for r in self.relations]}
-
-    # Read-only mapping access to the JSON object, kept for code outside the product (the product reads fields).
-    def __getitem__(self, key: str) -> Any:
-        return self.to_dict()[key]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(_FIELDS)
-
-    def __len__(self) -> int:
-        return len(_FIELDS)
 
 
 def empty_elements() -> Elements:

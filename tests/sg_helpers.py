@@ -30,5 +30,5 @@ def trace_actions(script, who: str, seeds=range(3), seconds: float = 8.0):
     """Per seed, the actions the trace of ``script`` shows for participant type ``who``."""
     from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
-    return [{a for k, a in elements_from_trace(run_script(script, seconds, seed))["actions"] if k == who}
+    return [{a for k, a in elements_from_trace(run_script(script, seconds, seed)).actions if k == who}
             for seed in seeds]

@@ -31,16 +31,16 @@ def test_label_is_valid_and_consistent(path):
     data = json.loads(path.read_text(encoding="utf-8"))
     elements = Elements.from_dict(data["elements"])
     assert data["use_case"] in GROUPS
-    participants = elements["participants"]
+    participants = elements.participants
     assert participants.count("ego") == 1
-    for who, action in elements["actions"]:
+    for who, action in elements.actions:
         assert who in participants, f"action {who} {action} of an actor not in participants"
-    for a, _, b in elements["relations"]:
+    for a, _, b in elements.relations:
         assert a in participants and b in participants and b == "ego" and a != "ego"
     # a collision has a type and two parties
-    colliders = [who for who, action in elements["actions"] if action == "collide"]
+    colliders = [who for who, action in elements.actions if action == "collide"]
     for who in set(p for p in PARTICIPANTS):
-        actions = {action for w, action in elements["actions"] if w == who}
+        actions = {action for w, action in elements.actions if w == who}
         assert ("collide" in actions) == bool(actions & {"collide_rear_end", "collide_side", "collide_head_on"})
     assert len(colliders) != 1
     assert read_label(path).use_case == data["use_case"]

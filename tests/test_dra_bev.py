@@ -172,10 +172,10 @@ def test_synthetic_lead_vehicle_brakes():
     assert isinstance(result, BevAnalysis)
     e = result.elements
     assert isinstance(e, Elements) and e == Elements.from_dict(e.to_dict())
-    assert e["road"] == "highway"
-    assert e["participants"] == ["car", "ego"]
-    assert ["car", "brake"] in e["actions"]
-    assert ["car", "ahead_of", "ego"] in e["relations"] and ["car", "same_lane", "ego"] in e["relations"]
+    assert e.road == "highway"
+    assert e.participants == ("car", "ego")
+    assert ("car", "brake") in e.actions
+    assert ("car", "ahead_of", "ego") in e.relations and ("car", "same_lane", "ego") in e.relations
     assert result.debug["lanes"] == 4
     speeds = [s for s in result.debug["ego_speed"] if s is not None]
     assert np.median(speeds) == pytest.approx(22.0, rel=0.12)   # from the stripes' motion
@@ -213,9 +213,9 @@ def test_ego_slowing_behind_a_steady_car(drop):
     assert np.nanmax(np.abs(measured / scale - np.array(truth))) < 3.0, np.round(measured / scale, 1)
     assert (np.nanmax(car) - np.nanmin(car)) / np.nanmedian(car) < 0.15, np.round(car, 1)
     e = result.elements
-    assert not {a for k, a in e["actions"] if k == "car"} & {"brake", "stop", "accelerate"}, result.description
-    assert ["car", "keep_lane"] in e["actions"] and ["car", "ahead_of", "ego"] in e["relations"] and \
-        ["car", "same_lane", "ego"] in e["relations"], result.description
+    assert not {a for k, a in e.actions if k == "car"} & {"brake", "stop", "accelerate"}, result.description
+    assert ("car", "keep_lane") in e.actions and ("car", "ahead_of", "ego") in e.relations and \
+        ("car", "same_lane", "ego") in e.relations, result.description
     assert "slower car ahead of it in the same lane" in result.description
 
 
@@ -223,7 +223,7 @@ def test_ego_slowing_behind_a_steady_car(drop):
                                        ((True, True, False, True), "t_junction"),
                                        ((True, True, False, False), "straight_road")])
 def test_synthetic_road_layouts(arms, road):
-    assert analyze_bev(_clip(_junction(arms))).elements["road"] == road
+    assert analyze_bev(_clip(_junction(arms))).elements.road == road
 
 
 def test_sparse_clip_of_a_file_is_reread(tmp_path):
@@ -234,7 +234,7 @@ def test_sparse_clip_of_a_file_is_reread(tmp_path):
     clip = read_video(path)                      # the pipeline's default: 2 frames/s, 16 frames
     result = analyze_bev(clip)
     assert "resampled_from" in result.debug["input"] and result.debug["input"]["frames"] == 26
-    assert ["car", "brake"] in result.elements["actions"]
+    assert ("car", "brake") in result.elements.actions
     assert analyze_bev_file(path).elements == result.elements
 
 
@@ -456,8 +456,8 @@ def test_stock_highway_env(tmp_path):
     finally:
         env.close()
     result = analyze_bev_file(path)
-    assert result.elements["road"] == "highway"
-    assert "ego" in result.elements["participants"] and "car" in result.elements["participants"]
+    assert result.elements.road == "highway"
+    assert "ego" in result.elements.participants and "car" in result.elements.participants
 
 
 @pytest.mark.slow
@@ -536,8 +536,8 @@ def test_steady_car_ahead_holds_its_speed(steady_lead_runs, name):
     assert np.nanmax(np.abs(measured[:n] / scale - truth_ego[:n])) < 3.0, np.round(measured[:n] / scale, 1)
     assert (np.nanmax(car) - np.nanmin(car)) / np.nanmedian(car) < 0.15, np.round(car, 1)
     e = result.elements
-    assert not {a for k, a in e["actions"] if k == "car"} & {"brake", "stop", "accelerate"}, result.description
+    assert not {a for k, a in e.actions if k == "car"} & {"brake", "stop", "accelerate"}, result.description
     if closes_in:
-        assert ["car", "keep_lane"] in e["actions"] and ["car", "ahead_of", "ego"] in e["relations"] and \
-            ["car", "same_lane", "ego"] in e["relations"], result.description
+        assert ("car", "keep_lane") in e.actions and ("car", "ahead_of", "ego") in e.relations and \
+            ("car", "same_lane", "ego") in e.relations, result.description
         assert "a slower car ahead of it in the same lane keeps to its lane" in result.description

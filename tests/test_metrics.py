@@ -39,9 +39,9 @@ def test_trace_semantics_lead_vehicle_brakes_then_cut_in():
         ego_x += 3.0
         car_x += car_v * 0.2
     elements = elements_from_trace(_trace(states))
-    assert elements["road"] == "highway"
-    assert ["car", "brake"] in elements["actions"]
-    assert ["car", "ahead_of", "ego"] in elements["relations"] and ["car", "same_lane", "ego"] in elements["relations"]
+    assert elements.road == "highway"
+    assert ("car", "brake") in elements.actions
+    assert ("car", "ahead_of", "ego") in elements.relations and ("car", "same_lane", "ego") in elements.relations
     assert e2e_sc(GT, elements) == 1.0
 
 
@@ -54,9 +54,9 @@ def test_trace_semantics_pedestrian_crossing_and_left_turn():
         states.append({"ego": [5.0 * t, 0.0, heading, 5.0], "Pedestrian1": [30.0, 6.0 - 1.5 * t, -math.pi / 2, 1.5]})
     elements = elements_from_trace(_trace(states, kinds={"ego": "ego", "Pedestrian1": "pedestrian"},
                                           map_name="urban_crossroads"))
-    assert elements["road"] == "intersection"
-    assert ["ego", "turn_left"] in elements["actions"]
-    assert ["pedestrian", "cross"] in elements["actions"]
+    assert elements.road == "intersection"
+    assert ("ego", "turn_left") in elements.actions
+    assert ("pedestrian", "cross") in elements.actions
 
 
 def test_trace_semantics_collisions_and_lane_changes_come_from_events():
@@ -65,8 +65,8 @@ def test_trace_semantics_collisions_and_lane_changes_come_from_events():
     events = [{"time": 1.0, "kind": "lane_change", "actors": ["Car1"], "direction": "right"},
               {"time": 2.0, "kind": "collision", "actors": ["ego", "Car1"]}]
     elements = elements_from_trace(_trace(states, events))
-    assert ["car", "lane_change_right"] in elements["actions"] and ["car", "cut_in"] in elements["actions"]
-    assert ["ego", "collide"] in elements["actions"] and ["car", "collide"] in elements["actions"]
+    assert ("car", "lane_change_right") in elements.actions and ("car", "cut_in") in elements.actions
+    assert ("ego", "collide") in elements.actions and ("car", "collide") in elements.actions
 
 
 def test_trace_semantics_pedestrian_crossing_ahead_of_a_stopped_ego():
@@ -82,10 +82,10 @@ def test_trace_semantics_pedestrian_crossing_ahead_of_a_stopped_ego():
 
     kinds = {"ego": "ego", "Pedestrian1": "pedestrian"}
     elements = elements_from_trace(_trace(states(x + 8.0), kinds=kinds, map_name="urban_two_way"))
-    assert ["pedestrian", "crossing_path", "ego"] in elements["relations"]
+    assert ("pedestrian", "crossing_path", "ego") in elements.relations
     # ... but one crossing 60 m beyond where the ego stopped did not.
     elements = elements_from_trace(_trace(states(x + 60.0), kinds=kinds, map_name="urban_two_way"))
-    assert ["pedestrian", "crossing_path", "ego"] not in elements["relations"]
+    assert ("pedestrian", "crossing_path", "ego") not in elements.relations
 
 
 @pytest.mark.parametrize("side", [1.0, -1.0])
@@ -98,10 +98,10 @@ def test_trace_semantics_car_merging_from_a_side_road(side):
         car = [30.0 + 8.0 * max(0.0, t - 2.0), side * 15.0 * (1.0 - turn), -side * (math.pi / 2) * (1 - turn), 6.0]
         states.append({"ego": [6.0 * t, 0.0, 0.0, 6.0], "Car1": car})
     elements = elements_from_trace(_trace(states, map_name="urban_t_junction"))
-    assert ["car", "merge"] in elements["actions"]
+    assert ("car", "merge") in elements.actions
     # A car that stays on the side road does not merge.
     stays = [{**s, "Car1": [30.0, side * 15.0, -side * math.pi / 2, 0.0]} for s in states]
-    assert ["car", "merge"] not in elements_from_trace(_trace(stays, map_name="urban_t_junction"))["actions"]
+    assert ("car", "merge") not in elements_from_trace(_trace(stays, map_name="urban_t_junction")).actions
 
 
 def test_an_undirected_lane_change_is_matched_by_either_direction_and_not_the_reverse():

@@ -94,7 +94,7 @@ def test_the_stall_names_the_braking_car_far_ahead():
     assert "63 m ahead" in sentence and "brakes" in sentence, sentence
     said = elements_from_text("The ego car drives in the right lane of a highway with three other cars nearby. "
                               + sentence)
-    assert ["car", "brake"] in said["actions"] and ["car", "same_lane", "ego"] in said["relations"]
+    assert ("car", "brake") in said.actions and ("car", "same_lane", "ego") in said.relations
 
 
 def test_the_cut_in_names_the_car_cutting_in_from_the_left():
@@ -104,7 +104,7 @@ def test_the_cut_in_names_the_car_cutting_in_from_the_left():
     assert interaction.to_dict()["manoeuvres"][0] == "cut_in" and "lane_change_right" in interaction.to_dict()["manoeuvres"]
     sentence = interaction_sentence(interaction)
     assert "cuts into the ego's lane" in sentence and "left" in sentence, sentence
-    assert ["car", "cut_in"] in elements_from_text(sentence)["actions"]
+    assert ("car", "cut_in") in elements_from_text(sentence).actions
 
 
 def test_a_description_that_names_the_interaction_is_not_told_it_again():
@@ -157,7 +157,7 @@ def test_an_actor_without_a_manoeuvre_is_named_where_it_was_unless_the_descripti
     vague = elements_from_text("The ego car drives in the left lane of a highway. Three other cars drive nearby.")
     sentence = interaction_sentence(interaction, known=vague)
     assert "lane to the right" in sentence, sentence
-    assert ["car", "right_of", "ego"] in elements_from_text(sentence)["relations"]
+    assert ("car", "right_of", "ego") in elements_from_text(sentence).relations
     placed = elements_from_text("A car drives in the lane to the right of the ego car.")
     assert interaction_sentence(interaction, known=placed) == ""
 
@@ -182,7 +182,7 @@ def test_the_speed_an_impact_takes_away_is_no_braking_of_the_struck_car():
 
     steady = _rear_end_into_steady_car(impact_drop=3.1)
     failure = Failure("collision", 4.0, 20, with_="lead")
-    assert ["car", "brake"] not in elements_from_trace(steady)["actions"]
+    assert ("car", "brake") not in elements_from_trace(steady).actions
     assert "brake" not in failure_interaction(steady, failure).manoeuvres
     behaviour = extract_behaviour(steady, Failure(type="collision", time=4.0, step=20, with_="lead", with_kind="car"))
     assert (behaviour.actor_manoeuvre, behaviour.ego_manoeuvre) == ("steady", "keeping_lane")

@@ -495,18 +495,20 @@ MAPPING_METHODS = ("__getitem__", "__iter__", "__len__", "__contains__", "keys",
 
 
 def test_a_typed_record_is_no_mapping():
-    """A record is read by its fields; its JSON object is its ``to_dict``. No record class is a ``Mapping`` or has a
-    mapping's methods, so a reader that reads one by key fails at once instead of reading a misspelled key as
-    ``None``."""
+    """A record is read by its fields; its JSON object is its ``to_dict``. No record class (the ``JsonRecord``s and
+    the semantic elements' ``Elements``) is a ``Mapping`` or has a mapping's methods, so a reader that reads one by
+    key fails at once instead of reading a misspelled key as ``None``."""
     from collections.abc import Mapping
 
+    from scenario_bank.elements import Elements
     from scenario_bank.records import EpisodeRecord, Provenance, recorded
 
     classes = _record_classes()
     assert len(classes) > 40 and EpisodeRecord in classes  # every record module was found
-    mappings = [c.__qualname__ for c in classes + [JsonRecord] if issubclass(c, Mapping)]
+    checked = classes + [JsonRecord, Elements]
+    mappings = [c.__qualname__ for c in checked if issubclass(c, Mapping)]
     assert not mappings, f"typed records that are mappings: {mappings}"
-    keyed = [f"{c.__qualname__}.{name}" for c in classes + [JsonRecord] for name in MAPPING_METHODS if hasattr(c, name)]
+    keyed = [f"{c.__qualname__}.{name}" for c in checked for name in MAPPING_METHODS if hasattr(c, name)]
     assert not keyed, f"typed records read by key: {keyed}"
     empty = Provenance.from_dict({})
     assert empty.to_dict() == {} and bool(empty) and not recorded(empty) and not recorded(None)
@@ -516,6 +518,12 @@ def test_a_typed_record_is_no_mapping():
     assert EpisodeRecord.from_dict(episode) != episode and EpisodeRecord.from_dict(episode).to_dict() == episode
     with pytest.raises(TypeError):
         EpisodeRecord.from_dict(episode)["seed"]
+    elements = Elements.from_dict({"road": "highway", "participants": ["ego"]})
+    for read in (lambda: elements["road"], lambda: dict(elements), lambda: "road" in elements, lambda: len(elements)):
+        with pytest.raises(TypeError):
+            read()
+    # every record is true, a record of nothing too: emptiness is tested against Elements()
+    assert bool(Elements()) and Elements.from_dict({}) == Elements() and elements != Elements()
 
 
 _FAILURE_KEYS = ("type", "time", "step", "with", "with_kind", "collision_type", "min_ttc", "speed", "kind", "actor",

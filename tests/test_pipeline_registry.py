@@ -77,7 +77,7 @@ def test_a_registered_dra_backend_describes_and_its_text_gives_the_elements(regi
     assert calls == [(4, "front", "why?", {"k": 1})]
     assert (description.text, description.backend, description.model, description.prompt_hash,
             description.video) == (text, "fixed", "fixed-1", "abc", str(CLIP))
-    assert description.elements == elements_from_text(text) and description.elements["road"] == "highway"
+    assert description.elements == elements_from_text(text) and description.elements.road == "highway"
     with pytest.raises(UnknownBackendError, match=r"use one of \('bev', 'openai', 'fixed'\)"):
         stages.describe(CLIP, backend="nope")
 

@@ -9,11 +9,11 @@ from dv2s_gym.pipeline.semantics.text import elements_from_text, parse_descripti
 
 
 def _kinds(text):
-    return sorted(elements_from_text(text)["participants"])
+    return sorted(elements_from_text(text).participants)
 
 
 def _actions(text):
-    return {tuple(a) for a in elements_from_text(text)["actions"]}
+    return {tuple(a) for a in elements_from_text(text).actions}
 
 
 # ----------------------------------------------------------------------------- actors
@@ -84,7 +84,7 @@ def test_pedestrian_dashing_out_from_behind_something():
     cross = child.detail("cross")
     assert child.has("cross") and cross["sudden"] is True and cross["from_behind"].kind == "car"
     elements = elements_from_text("A child dashes out from behind a parked van in front of the ego car.")
-    assert ["pedestrian", "behind", "car"] not in elements["relations"]  # occlusion, not a position
+    assert ("pedestrian", "behind", "car") not in elements.relations  # occlusion, not a position
     assert ("pedestrian", "cross") in _actions("A jogger appears from behind a bus and crosses.")
 
 
@@ -92,7 +92,7 @@ def test_unprotected_left_turn():
     parsed = parse_description("The AV makes an unprotected left turn while an oncoming car goes straight.")
     ego = parsed.ego
     assert ego.has("turn_left") and ego.detail("turn_left")["unprotected"] is True
-    assert ("car", "crossing_path", "ego") in {tuple(r) for r in parsed.elements()["relations"]}
+    assert ("car", "crossing_path", "ego") in {tuple(r) for r in parsed.elements().relations}
     assert ("ego", "turn_left") in _actions("The ego vehicle is on an unprotected left at the junction.")
 
 
@@ -251,7 +251,7 @@ def test_rider_on_a_bike_is_one_bicycle_and_rows_of_parked_cars_stay():
     text = ("The ego car drives down a residential street with cars parked on both sides while a kid on a bike "
             "rides out of a driveway.")
     parsed = parse_description(text)
-    assert sorted(parsed.elements()["participants"]) == ["bicycle", "car", "car", "ego"]
+    assert sorted(parsed.elements().participants) == ["bicycle", "car", "car", "ego"]
     assert ("bicycle", "pull_out") in _actions(text) and parsed.features["parking_lane"] is True
 
 
@@ -264,11 +264,11 @@ def test_no_stop_from_a_four_way_stop_and_lost_control():
 
 def test_crash_typology_phrases():
     assert ("car", "crossing_path", "ego") in {tuple(r) for r in elements_from_text(
-        "The ego vehicle is struck by a crossing vehicle.")["relations"]}
+        "The ego vehicle is struck by a crossing vehicle.").relations}
     assert ("ego", "drift") in _actions("The ego vehicle departs the road edge on a curve.")
     assert ("car", "pull_out") in _actions("A vehicle parked on the shoulder pulls into traffic in front of the ego.")
     assert ("car", "lane_change_right") in _actions("A van pulls alongside the ego and then merges right.")
-    rels = {tuple(r) for r in elements_from_text("The ego is following a bus.")["relations"]}
+    rels = {tuple(r) for r in elements_from_text("The ego is following a bus.").relations}
     assert ("bus", "ahead_of", "ego") in rels and ("bus", "behind", "ego") not in rels
     assert parse_description("A truck crosses at a non-signalized junction.").features["signals"] is False
 
@@ -280,7 +280,7 @@ def test_crash_typology_phrases():
     ("The front of V2 impacted the right side of V1.", "collide_side"),
 ])
 def test_untyped_collisions_get_a_type_for_every_participant(text, kind):
-    typed = [tuple(a) for a in elements_from_text(text)["actions"] if a[1].startswith("collide")]
+    typed = [tuple(a) for a in elements_from_text(text).actions if a[1].startswith("collide")]
     kinds = {a[1] for a in typed}
     assert kinds == {"collide", kind} and len(typed) == 4
 
@@ -296,17 +296,17 @@ def test_animals_and_test_names():
 
 def test_occluders_and_kerb_sides():
     rels = {tuple(r) for r in elements_from_text(
-        "A boy runs out from behind a parked lorry on the right into the path of the AV.")["relations"]}
+        "A boy runs out from behind a parked lorry on the right into the path of the AV.").relations}
     assert {("truck", "ahead_of", "ego"), ("pedestrian", "crossing_path", "ego")} <= rels
     rels = {tuple(r) for r in elements_from_text(
-        "A woman hidden behind a stopped bus steps out in front of the ego car.")["relations"]}
+        "A woman hidden behind a stopped bus steps out in front of the ego car.").relations}
     assert ("bus", "ahead_of", "ego") in rels and ("pedestrian", "behind", "bus") not in rels
-    rels = {tuple(r) for r in elements_from_text("A jogger crosses from the left kerb in front of the ego.")["relations"]}
+    rels = {tuple(r) for r in elements_from_text("A jogger crosses from the left kerb in front of the ego.").relations}
     assert ("pedestrian", "left_of", "ego") in rels
 
 
 def test_following_merging_and_rural_highways():
-    rels = {tuple(r) for r in elements_from_text("The test vehicle follows a white hatchback.")["relations"]}
+    rels = {tuple(r) for r in elements_from_text("The test vehicle follows a white hatchback.").relations}
     assert ("car", "ahead_of", "ego") in rels
     assert {("car", "merge"), ("car", "lane_change_left")} <= _actions("A taxi merges left in front of us.")
     assert parse_description("A tractor drives on a two-lane rural highway.").road == "straight_road"
@@ -327,10 +327,10 @@ def test_contact_backing_and_cross_traffic():
         "A hatchback in the adjacent lane to its left drifted over and made contact with the AV.")
     assert ("ego", "collide_side") in _actions("The subject vehicle backs into the side of a parked SUV.")
     rels = {tuple(r) for r in elements_from_text(
-        "At a four-way junction a bus from V1's right goes straight while V1 goes straight.")["relations"]}
+        "At a four-way junction a bus from V1's right goes straight while V1 goes straight.").relations}
     assert {("bus", "right_of", "ego"), ("bus", "crossing_path", "ego")} <= rels
     rels = {tuple(r) for r in elements_from_text(
-        "At the intersection a car from the right turns right into the ego's lane ahead of it.")["relations"]}
+        "At the intersection a car from the right turns right into the ego's lane ahead of it.").relations}
     assert ("car", "crossing_path", "ego") not in rels
     assert ("ego", "turn_left") in _actions("4-way ixn, ego turns L after a bus passes.")
 
@@ -347,21 +347,21 @@ def test_another_without_a_noun_and_both():
     text = ("The ego is in the middle lane of a three-lane motorway; a van in the left lane ahead and another in the "
             "right lane ahead both cut into the middle lane in front of the ego.")
     elements = elements_from_text(text)
-    assert elements["participants"] == ["car", "car", "ego"]
+    assert elements.participants == ("car", "car", "ego")
     assert {("car", "cut_in"), ("car", "lane_change_left"), ("car", "lane_change_right")} <= _actions(text)
-    assert {("car", "left_of", "ego"), ("car", "right_of", "ego")} <= {tuple(r) for r in elements["relations"]}
+    assert {("car", "left_of", "ego"), ("car", "right_of", "ego")} <= {tuple(r) for r in elements.relations}
 
 
 def test_place_phrase_before_the_subject_and_blocking():
     assert ("ego", "lane_change_left") in _actions("On the highway the ego car changes lanes to the left.")
-    rels = {tuple(r) for r in elements_from_text("A barrier blocks the ego's lane ahead.")["relations"]}
+    rels = {tuple(r) for r in elements_from_text("A barrier blocks the ego's lane ahead.").relations}
     assert {("obstacle", "same_lane", "ego"), ("obstacle", "ahead_of", "ego")} <= rels
     assert _kinds("An adversarial agent vehicle cuts off the AV.") == ["car", "ego"]
 
 
 def test_alias_possessives_and_part_subjects():
     rels = {tuple(r) for r in elements_from_text(
-        "A pedestrian walks in the test vehicle's lane ahead of it.")["relations"]}
+        "A pedestrian walks in the test vehicle's lane ahead of it.").relations}
     assert ("pedestrian", "same_lane", "ego") in rels
     assert {("car", "collide"), ("ego", "collide")} <= _actions(
         "V2 merged left, and the right front of V1 struck the left rear of V2.")

@@ -101,14 +101,14 @@ def test_counts_and_groups():
     (group,) = parsed.entities
     assert group.count == 3
     assert sorted(group.attrs["cross_dirs"]) == [("left_to_right", 1), ("right_to_left", 2)]
-    assert elements_from_text("Two cars ahead of the ego brake.")["participants"] == ["car", "car", "ego"]
-    assert elements_from_text("A car and another car drive ahead.")["participants"] == ["car", "car"]
+    assert elements_from_text("Two cars ahead of the ego brake.").participants == ("car", "car", "ego")
+    assert elements_from_text("A car and another car drive ahead.").participants == ("car", "car")
 
 
 def test_negation_and_nominal_forms_are_not_actions():
-    assert elements_from_text("The ego car does not stop.")["actions"] == []
-    assert elements_from_text("There is a stop sign at the junction.")["actions"] == []
-    assert elements_from_text("The car ahead of the ego avoids a collision.")["actions"] == []
+    assert elements_from_text("The ego car does not stop.").actions == ()
+    assert elements_from_text("There is a stop sign at the junction.").actions == ()
+    assert elements_from_text("The car ahead of the ego avoids a collision.").actions == ()
 
 
 def _bank_entries():
@@ -155,8 +155,8 @@ def test_bank_descriptions_recall_and_precision():
 def test_collision_types_from_text(text, owner, kind):
     """A typed collision states collide and its type for every participant (scenario_bank.elements), the same
     elements trace semantics give: here the owner and the ego or the car it hits."""
-    actions = elements_from_text(text)["actions"]
-    assert [owner, "collide"] in actions and [owner, kind] in actions
+    actions = elements_from_text(text).actions
+    assert (owner, "collide") in actions and (owner, kind) in actions
     typed = [a for a in actions if a[1].startswith("collide_")]
     assert {a[1] for a in typed} == {kind} and len(typed) == 2 and owner in {a[0] for a in typed}
 
@@ -168,4 +168,4 @@ def test_collision_types_from_text(text, owner, kind):
     "The oncoming car drifts toward the ego car but does not hit it head-on.",
 ])
 def test_no_collision_type_from_text(text):
-    assert not [a for a in elements_from_text(text)["actions"] if a[1].startswith("collide_")]
+    assert not [a for a in elements_from_text(text).actions if a[1].startswith("collide_")]

@@ -29,8 +29,8 @@ def test_pull_out_is_placed_at_the_kerb_of_a_street(monkeypatch):
     # a car at the kerb does not need a second lane; it is parked on the parking lane of the parking street
     assert result.frame.map == "urban_parking"
     assert "PullOutWhenNear(egoLane.centerline" in result.script
-    assert ["car", "pull_out"] in result.elements["actions"]
-    assert ["car", "right_of", "ego"] in result.elements["relations"]
+    assert ("car", "pull_out") in result.elements.actions
+    assert ("car", "right_of", "ego") in result.elements.relations
     check_script(result.script)
 
 
@@ -45,7 +45,7 @@ def test_ego_pull_out_on_a_highway_starts_on_the_hard_shoulder(monkeypatch):
     # parked on the hard shoulder right of it (sg-kerb; before, the rightmost lane stood in for the shoulder)
     assert "ego = new Car right of egoSpot by Range(2.15, 2.35)" in result.script
     assert "PullOutWhenNear(egoLane.centerline" in result.script
-    assert ["car", "left_of", "ego"] in result.elements["relations"]  # traffic in the lane it pulls into
+    assert ("car", "left_of", "ego") in result.elements.relations  # traffic in the lane it pulls into
 
 
 def test_u_turn_is_placed(monkeypatch):
@@ -55,7 +55,7 @@ def test_u_turn_is_placed(monkeypatch):
     result = _generate(monkeypatch, parsed)
     assert result.frame.map == "urban_two_way"
     assert "UTurnLater(" in result.script
-    assert ["ego", "u_turn"] in result.elements["actions"]
+    assert ("ego", "u_turn") in result.elements.actions
     check_script(result.script)
 
 
@@ -69,7 +69,7 @@ def test_pull_out_runs_and_shows_in_the_trace(monkeypatch):
 @pytest.mark.slow
 def test_reversing_out_shows_reverse_and_pull_out(monkeypatch):
     result = _generate(monkeypatch, _parked_car("reverse", "pull_out"))
-    assert {"reverse", "pull_out"} <= {a for k, a in result.elements["actions"] if k == "car"}
+    assert {"reverse", "pull_out"} <= {a for k, a in result.elements.actions if k == "car"}
     runs = trace_actions(result.script, "car")
     assert sum("reverse" in acts for acts in runs) >= 2, runs
     assert sum("pull_out" in acts for acts in runs) >= 2, runs
@@ -95,7 +95,7 @@ def test_u_turn_runs_and_shows_in_the_trace(monkeypatch, who):
     (ego if who == "ego" else car).add_action("u_turn")
     parsed = ParsedDescription(text="Someone turns round.", road="straight_road", entities=[ego, car])
     result = _generate(monkeypatch, parsed)
-    assert [who, "u_turn"] in result.elements["actions"]
+    assert (who, "u_turn") in result.elements.actions
     hits = sum("u_turn" in acts for acts in trace_actions(result.script, who, seconds=10.0))
     assert hits >= 2, hits
 
@@ -113,7 +113,7 @@ def test_a_merge_from_a_side_road_is_a_merge_not_a_cut_in(monkeypatch):
     result = _generate(monkeypatch, _junction_merge())
     assert result.frame.map == "urban_t_junction"
     assert "PullOutWhenEgoNear(" in result.script
-    acts = {a for k, a in result.elements["actions"] if k == "car"}
+    acts = {a for k, a in result.elements.actions if k == "car"}
     assert "merge" in acts and "cut_in" not in acts
 
 
@@ -127,7 +127,7 @@ def test_the_egos_merge_without_a_ramp_is_a_lane_change(monkeypatch):
                                entities=[ego, barrier])
     result = _generate(monkeypatch, parsed)
     assert result.frame.map == "urban_multilane"  # a lane to merge into in the ego's direction, in town
-    assert ["ego", "lane_change_left"] in result.elements["actions"]
+    assert ("ego", "lane_change_left") in result.elements.actions
     assert any("merge without an on-ramp" in w for w in result.warnings)
 
 
@@ -159,7 +159,7 @@ def test_a_swerve_back_into_lane_is_not_a_cut_in(monkeypatch):
     parsed = ParsedDescription(text="A car on the right swerves toward the ego and returns.", road="highway",
                                entities=[ego, car])
     result = _generate(monkeypatch, parsed)
-    acts = {a for k, a in result.elements["actions"] if k == "car"}
+    acts = {a for k, a in result.elements.actions if k == "car"}
     assert acts == {"swerve"}
     assert "SwerveAndBack(" in result.script and "CutInWhenAhead" not in result.script
     assert any("built as a swerve" in w for w in result.warnings)

@@ -36,8 +36,8 @@ def test_new_kinds_get_their_model_class(monkeypatch, kind, cls):
     result = _generate(monkeypatch, _lead(kind, "brake"))
     assert f"new {cls}" in result.script
     assert check_script(result.script) == []
-    assert [kind, "brake"] in result.elements["actions"]
-    assert kind in result.elements["participants"]
+    assert (kind, "brake") in result.elements.actions
+    assert kind in result.elements.participants
 
 
 def test_a_bicycle_rides_at_bicycle_speed(monkeypatch):
@@ -55,7 +55,7 @@ def test_new_kinds_run_and_show_in_the_trace(monkeypatch, kind):
     result = _generate(monkeypatch, _lead(kind, "brake"))
     trace = _run(result.script)
     assert kind in set(trace.kinds.values())
-    assert kind in elements_from_trace(trace)["participants"]
+    assert kind in elements_from_trace(trace).participants
 
 
 def test_unplaced_phrases_become_warnings(monkeypatch):
@@ -95,13 +95,13 @@ def test_an_action_the_kind_cannot_do_is_a_warning_not_the_main_event(monkeypatc
                                entities=[ego, walker])
     result = _generate(monkeypatch, parsed)
     assert any("go straight" in w for w in result.warnings)
-    assert ["pedestrian", "cross"] in result.elements["actions"]
+    assert ("pedestrian", "cross") in result.elements.actions
 
 
 def test_undirected_lane_change_takes_a_side(monkeypatch):
     parsed = _lead("car", "lane_change", road="highway")
     result = _generate(monkeypatch, parsed)
-    acts = {a for k, a in result.elements["actions"] if k == "car"}
+    acts = {a for k, a in result.elements.actions if k == "car"}
     assert acts & {"lane_change_left", "lane_change_right"}
     ego = Entity("ego")
     car = Entity("car", attrs={"noun": "car"})
@@ -109,7 +109,7 @@ def test_undirected_lane_change_takes_a_side(monkeypatch):
     car.relations.append(("left_of", ego))
     result = _generate(monkeypatch, ParsedDescription(text="A car left of the ego changes lanes.", road="highway",
                                                       entities=[ego, car]))
-    assert ["car", "lane_change_right"] in result.elements["actions"]
+    assert ("car", "lane_change_right") in result.elements.actions
 
 
 def _rear_end() -> ParsedDescription:
@@ -124,8 +124,8 @@ def _rear_end() -> ParsedDescription:
 def test_rear_end_collision_places_the_actor_ahead_in_the_ego_lane(monkeypatch):
     parsed = _rear_end()
     result = _generate(monkeypatch, parsed)
-    assert ["car", "collide"] in result.elements["actions"]
-    assert ["car", "ahead_of", "ego"] in result.elements["relations"]
+    assert ("car", "collide") in result.elements.actions
+    assert ("car", "ahead_of", "ego") in result.elements.relations
     assert not any("collide rear end" in w for w in result.warnings)
 
 
@@ -149,7 +149,7 @@ def test_swerve_runs_and_shows_in_the_trace(monkeypatch, who):
         car.add_action("keep_lane")
     parsed = ParsedDescription(text="Someone swerves.", road="straight_road", entities=[ego, car])
     result = _generate(monkeypatch, parsed)
-    assert [who, "swerve"] in result.elements["actions"]
+    assert (who, "swerve") in result.elements.actions
     hits = sum("swerve" in acts for acts in trace_actions(result.script, who, seconds=8.0))
     assert hits >= 2, hits
 
@@ -163,4 +163,4 @@ def test_ego_bypasses_an_obstacle_in_its_lane(monkeypatch):
                                entities=[ego, box])
     result = _generate(monkeypatch, parsed)
     assert "OvertakeAndReturn(obstacle1" in result.script
-    assert ["ego", "overtake"] in result.elements["actions"]
+    assert ("ego", "overtake") in result.elements.actions

@@ -24,7 +24,7 @@ def _straight(x0, speed, steps=60, y=1.75, heading=0.0):
 
 
 def _actions(elements, kind):
-    return {a for k, a in elements["actions"] if k == kind}
+    return {a for k, a in elements.actions if k == kind}
 
 
 def _u_turn(x0=0.0, speed=4.0, steps=60):
@@ -103,9 +103,9 @@ def test_new_kinds_come_from_the_trace_kinds():
               "v3": _straight(10.0, 12.0)}
     kinds = {"v1": "bus", "v2": "bicycle", "v3": "motorcycle"}
     el = elements_from_trace(_trace(tracks, kinds=kinds))
-    assert {"bus", "bicycle", "motorcycle"} <= set(el["participants"])
+    assert {"bus", "bicycle", "motorcycle"} <= set(el.participants)
     assert "keep_lane" in _actions(el, "bus")
-    assert "oncoming" in {r for k, r, o in el["relations"] if k == "bicycle"}
+    assert "oncoming" in {r for k, r, o in el.relations if k == "bicycle"}
 
 
 def test_ego_overtaking_a_bus_is_judged():

@@ -19,9 +19,9 @@ def test_the_ego_stops_for_the_crossing_car_then_goes_straight_after_it_has_pass
     assert "StopForConflict(" in result.script
     trace = run_script(result.script, 10.0, seed)
     elements = elements_from_trace(trace)
-    ego = {a for k, a in elements["actions"] if k == "ego"}
+    ego = {a for k, a in elements.actions if k == "ego"}
     assert {"stop", "go_straight"} <= ego
-    assert ("car", "go_straight") in {tuple(a) for a in elements["actions"]}
+    assert ("car", "go_straight") in {tuple(a) for a in elements.actions}
     # it waited: the ego enters the junction only after the car has left it
     view = map_view(trace)
     track = {name: np.array([step[name] for step in trace.states]) for name in ("ego", "Car1")}
@@ -49,7 +49,7 @@ def test_no_other_vehicles_is_read_and_said():
 def test_a_typed_collision_is_meant_and_checked_against_the_run():
     result = generate_rules("On a highway a car in the lane to the left of the ego changes lanes to the right and "
                             "sideswipes the ego.")
-    assert ["ego", "collide_side"] in result.elements["actions"]
+    assert ("ego", "collide_side") in result.elements.actions
     shown = {"road": "highway", "participants": ["ego", "car"], "actions": [["ego", "collide"], ["car", "collide"]],
              "relations": []}
     missing = unshown_warnings(result.elements, shown)
@@ -67,7 +67,7 @@ def test_a_parked_ego_backing_out_collides_with_the_side_of_the_car_coming_from_
     hits = 0
     for seed in (0, 1):
         check = check_scenario(result.script, seed=seed, seconds=10.0)
-        actions = {tuple(a) for a in check.simulated_elements["actions"]}
+        actions = {tuple(a) for a in check.simulated_elements.actions}
         assert ("ego", "reverse") in actions
         hits += {("ego", "collide_side"), ("car", "collide_side")} <= actions
     assert hits == 2
@@ -82,7 +82,7 @@ def test_an_ego_that_stops_then_turns_left_into_an_oncoming_car_is_hit_on_its_si
     assert "StopThenGoInto(" in result.script
     for seed in (0, 1):
         check = check_scenario(result.script, seed=seed, seconds=10.0)
-        actions = {tuple(a) for a in check.simulated_elements["actions"]}
+        actions = {tuple(a) for a in check.simulated_elements.actions}
         assert {("ego", "stop"), ("ego", "collide_side"), ("car", "collide_side"), ("car", "go_straight")} <= actions
 
 

@@ -17,7 +17,7 @@ PARKING_CENTRE = LANE_WIDTH + PARKING_WIDTH / 2  # lateral offset of a parking l
 
 
 def _actions(elements, who):
-    return {a for k, a in elements["actions"] if k == who}
+    return {a for k, a in elements.actions if k == who}
 
 
 def _other(trace, kind="car"):
@@ -128,7 +128,7 @@ def test_a_parked_car_stands_on_the_parking_lane_and_the_ego_pulls_out_of_it(tmp
     assert last["ego"][0] - first["ego"][0] > 20
     assert not any(e["kind"] in ("off_road", "collision") for e in trace.events)
     elements = elements_from_trace(trace)
-    assert elements["road"] == "straight_road"
+    assert elements.road == "straight_road"
     assert "pull_out" in _actions(elements, "ego")
 
 
@@ -153,7 +153,7 @@ def test_a_pull_out_of_a_parking_space_gets_the_parking_street():
     assert result.frame.map == PARKING_STREET
     assert "param map = 'urban_parking'" in result.script
     assert "car1 = new Car right of car1Spot by Range(1.9, 2.1)" in result.script
-    assert result.elements["road"] == "straight_road"
+    assert result.elements.road == "straight_road"
 
 
 def test_a_street_said_to_have_parking_gets_the_parking_street_and_parked_cars_stand_on_it():
@@ -241,8 +241,8 @@ def test_a_child_running_out_between_parked_cars_crosses_in_the_run():
     result = generate_rules("A child runs out from behind two parked cars on the right into the path of the ego.")
     check = check_scenario(result.script, seed=0, seconds=10.0)
     assert check.ran, check.error
-    assert ["pedestrian", "cross"] in check.simulated_elements["actions"]
-    assert ["car", "right_of", "ego"] in check.simulated_elements["relations"]
+    assert ("pedestrian", "cross") in check.simulated_elements.actions
+    assert ("car", "right_of", "ego") in check.simulated_elements.relations
 
 
 def test_parked_cars_on_the_parking_street_stand_at_the_kerb_not_in_the_egos_lane():
@@ -251,4 +251,4 @@ def test_parked_cars_on_the_parking_street_stand_at_the_kerb_not_in_the_egos_lan
     car = next(a for a in result.frame.actors if a.kind == "car")
     assert car.role == "far_side" and "right_of" in car.relations and "same_lane" not in car.relations
     assert "car1_1 = new Car right of car1_1Spot by Range(1.9, 2.1)" in result.script
-    assert ["car", "right_of", "ego"] in result.elements["relations"]
+    assert ("car", "right_of", "ego") in result.elements.relations

@@ -42,7 +42,7 @@ def test_a_town_street_that_needs_a_second_lane_gets_the_multilane_street(monkey
     result = generate_from(monkeypatch, _cut_in())
     assert result.frame.map == MULTI
     assert "param map = 'urban_multilane'" in result.script
-    assert result.elements["road"] == "straight_road"
+    assert result.elements.road == "straight_road"
     assert not any("highway" in w for w in result.warnings), result.warnings
     assert "param ego_speed = Range(8, 12)" in result.script  # town speeds, not highway ones
     assert check_script(result.script) == []
@@ -62,7 +62,7 @@ def test_a_plain_town_street_stays_one_lane_per_direction(monkeypatch):
 def test_a_highway_stays_a_highway(monkeypatch):
     result = generate_from(monkeypatch, _cut_in(road="highway"))
     assert result.frame.map == "highway_straight"
-    assert result.elements["road"] == "highway"
+    assert result.elements.road == "highway"
 
 
 def test_three_lanes_in_one_direction_go_to_the_highway_map_with_a_warning(monkeypatch):
@@ -107,7 +107,7 @@ def test_an_oncoming_car_on_the_multilane_street_drives_in_the_oncoming_lane(mon
     assert result.frame.map == MULTI
     assert "oncomingLane = laneTuple[7]" in result.script
     assert "car1 = new Car at oncomingLane.centerline" in result.script
-    assert ["car", "oncoming", "ego"] in result.elements["relations"]
+    assert ("car", "oncoming", "ego") in result.elements.relations
     assert not any("one-way" in w for w in result.warnings), result.warnings
 
 
@@ -188,8 +188,8 @@ def test_the_multilane_street_runs_with_traffic_on_every_lane(tmp_path):
     changes = [e for e in trace.events if e["kind"] == "lane_change"]
     assert changes and changes[0]["direction"] == "right"
     elements = elements_from_trace(trace)
-    assert elements["road"] == "straight_road"
-    assert ["car", "oncoming", "ego"] in elements["relations"]
+    assert elements.road == "straight_road"
+    assert ("car", "oncoming", "ego") in elements.relations
     assert not any(e["kind"] == "collision" for e in trace.events)
 
 
@@ -202,10 +202,10 @@ def test_a_cut_in_on_the_multilane_street_shows_in_the_trace(monkeypatch):
     for seed in range(3):
         trace = run_script(result.script, 8.0, seed)
         elements = elements_from_trace(trace)
-        assert elements["road"] == "straight_road"
+        assert elements.road == "straight_road"
         ego_speeds = [states["ego"][3] for states in trace.states]
         assert max(ego_speeds) < 14.0  # town speed
-        hits += ["car", "cut_in"] in elements["actions"]
+        hits += ("car", "cut_in") in elements.actions
     assert hits >= 2, hits
 
 
@@ -251,7 +251,7 @@ def _circulating_from_the_left(collide: bool = True, cut_in: bool = False):
 def test_a_roundabout_gets_the_roundabout_map_without_a_warning(monkeypatch):
     result = generate_from(monkeypatch, _circulating_from_the_left())
     assert result.frame.map == RING
-    assert result.elements["road"] == "roundabout"
+    assert result.elements.road == "roundabout"
     assert sg_rules.MAP_ROADS[RING] == "roundabout" and RING in sg_rules.JUNCTION_MAPS
     assert not any("roundabout" in w for w in result.warnings), result.warnings
     assert check_script(result.script) == []
@@ -285,8 +285,8 @@ def test_a_vehicle_circulating_from_the_left_hits_the_entering_ego(monkeypatch):
     for seed in range(3):
         trace = run_script(result.script, 8.0, seed)
         elements = elements_from_trace(trace)
-        assert elements["road"] == "roundabout"
-        hits += ["car", "collide"] in elements["actions"] and ["car", "left_of", "ego"] in elements["relations"]
+        assert elements.road == "roundabout"
+        hits += ("car", "collide") in elements.actions and ("car", "left_of", "ego") in elements.relations
     assert hits >= 2, hits
 
 
@@ -304,4 +304,4 @@ def test_a_vehicle_circulating_from_the_left_passes_before_the_ego_when_nobody_c
         assert min(gaps) > 5.0  # it is gone past the ego's entry before the ego gets there
         assert min(s[car][3] for s in trace.states) > 4.0  # and it did not stop for the ego
         elements = elements_from_trace(trace)
-        assert ["car", "left_of", "ego"] in elements["relations"] and elements["road"] == "roundabout"
+        assert ("car", "left_of", "ego") in elements.relations and elements.road == "roundabout"

@@ -228,6 +228,6 @@ def test_standing_pedestrian_on_a_map_without_a_junction(description, map_name):
             lateral = (x - ego0[0]) * math.sin(ego0[2]) - (y - ego0[1]) * math.cos(ego0[2])
             assert abs(lateral) > 1.75
         elements = elements_from_trace(trace)
-        assert "pedestrian" in elements["participants"]
-        assert ["pedestrian", "cross"] not in elements["actions"]
-        assert ["pedestrian", "crossing_path", "ego"] not in elements["relations"]
+        assert "pedestrian" in elements.participants
+        assert ("pedestrian", "cross") not in elements.actions
+        assert ("pedestrian", "crossing_path", "ego") not in elements.relations

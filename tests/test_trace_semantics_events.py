@@ -14,7 +14,7 @@ pytestmark = pytest.mark.slow
 
 
 def _actions(elements, who):
-    return {a for k, a in elements["actions"] if k == who}
+    return {a for k, a in elements.actions if k == who}
 
 
 def _simulate(text, seed=0, seconds=10.0):
@@ -23,7 +23,7 @@ def _simulate(text, seed=0, seconds=10.0):
 
 def test_ego_drifting_toward_the_road_edge_drifts_and_does_not_keep_its_lane():
     elements = _simulate("On a two-lane rural road the ego car drifts slowly off the right edge of the road.")
-    assert elements["road"] == "straight_road"
+    assert elements.road == "straight_road"
     assert "drift" in _actions(elements, "ego")
     assert not {"keep_lane", "lane_change_left", "lane_change_right", "swerve"} & _actions(elements, "ego")
 

@@ -33,7 +33,7 @@ def _drive(x0, speed, steps=50, y=1.75, heading=0.0, stop_at=None):
 
 
 def _actions(elements, kind):
-    return {a for k, a in elements["actions"] if k == kind}
+    return {a for k, a in elements.actions if k == kind}
 
 
 # ------------------------------------------------------------------------------------------- go_straight
@@ -41,7 +41,7 @@ def _actions(elements, kind):
 def test_ego_driving_through_the_junction_goes_straight():
     ego = _drive(-40.0, 8.0)  # 80 m in 10 s: from x=-40 through the junction to x=+40
     elements = elements_from_trace(_trace([{"ego": e} for e in ego], map_name="urban_crossroads"))
-    assert elements["road"] == "intersection"
+    assert elements.road == "intersection"
     assert "go_straight" in _actions(elements, "ego")
 
 
@@ -219,4 +219,4 @@ def test_every_collision_gets_its_type_for_both_actors():
 
 def test_no_collision_no_collision_type():
     elements = elements_from_trace(_trace([{"ego": e, "Car1": [e[0] + 30, 1.75, 0.0, 10.0]} for e in _drive(0, 10)]))
-    assert not {a for _, a in elements["actions"] if a.startswith("collide")}
+    assert not {a for _, a in elements.actions if a.startswith("collide")}

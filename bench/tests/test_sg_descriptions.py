@@ -19,7 +19,7 @@ def _stems(suffix: str) -> set[str]:
 
 def test_bench_analysis_counts_lost_elements_and_silent_drops():
     stem = "nhtsa_lead_stopped_a"  # straight_road; ego, car; car stop; car ahead_of ego; car same_lane ego
-    exact = read_label(FOLDER / f"{stem}.label.json").elements
+    exact = read_label(FOLDER / f"{stem}.label.json").elements.to_dict()
     partial = dict(exact, actions=[], relations=[["car", "ahead_of", "ego"]])
     report = {"items": [
         {"stem": stem, "use_case": "nhtsa_typology", "metrics": {"SP": 1.0}, "ok": True,
