@@ -101,3 +101,19 @@ def test_the_run_refuses_a_baseline_report_judged_by_another_detector(tmp_path):
 
 def test_no_replacement_is_left_over():
     assert warnings(_report()) == []
+
+
+def test_a_baseline_judged_on_other_kinds_is_refused_as_such_and_its_kinds_are_the_default(tmp_path):
+    """A run against a report judged on ``off_road`` only, asked to judge ``collision`` too, is told which kinds the
+    report was judged on and how to match them; left out, ``--failure`` is the report's."""
+    from dv2s_gym.regress.report import baseline_defaults
+
+    baseline = _report(kinds=["off_road"])
+    with pytest.raises(ReportMismatchError) as refused:
+        check_baseline_code(baseline, path="base/report.json", kinds=KINDS, code_identity=report_code_identity(KINDS))
+    message = str(refused.value)
+    assert "was judged on off_road only, not on collision" in message and "--failure off_road" in message
+    assert "another detector" not in message
+    write_json(baseline, tmp_path / "report.json")
+    assert baseline_defaults(tmp_path / "report.json", None, None, None) == (0, None, ["off_road"])
+    assert baseline_defaults(tmp_path / "report.json", None, None, "collision")[2] == "collision"

@@ -4,6 +4,8 @@ field of the wrong kind is named."""
 
 from __future__ import annotations
 
+import argparse
+
 import json
 import re
 from pathlib import Path
@@ -142,3 +144,14 @@ def test_the_report_format_documented_in_the_module_is_the_version_written():
     assert f'"schema_version": {report_module.SCHEMA_VERSION},' in doc
     page = (Path(__file__).resolve().parents[1] / "docs" / "regress.md").read_text()
     assert re.findall(r"schema `dv2s-regress` version (\d+)", page) == [str(report_module.SCHEMA_VERSION)]
+
+
+def test_the_command_help_names_no_other_report_version():
+    """``dv2s regress --help`` points to the format's page and names no version the code does not write."""
+    from dv2s_gym.cli import build_parser
+
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    text = " ".join(commands.choices["regress"].format_help().split())
+    assert "schema dv2s-regress" in text and "docs/regress.md" in text
+    named = re.findall(r"dv2s-regress,? v(?:ersion )?(\d+)", text)
+    assert all(version == str(report_module.SCHEMA_VERSION) for version in named), named

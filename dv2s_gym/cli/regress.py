@@ -30,7 +30,7 @@ def add_parser(subparsers) -> None:
         "right, beside the pooled one, with the family-wise false-alarm rate at most --alpha. The episodes per "
         "scenario are planned from --mde and --power unless --episodes is given; the report states the power "
         "the run had. Writes "
-        "report.json (schema dv2s-regress v1), junit.xml, report.md, results.jsonl and traces/ of failed "
+        "report.json (schema dv2s-regress; its format in docs/regress.md), junit.xml, report.md, results.jsonl and traces/ of failed "
         "episodes to --out; rerunning with the same --out and settings resumes.",
         epilog="exit status: 0 PASS (or no baseline: measures only), 1 FAIL, 3 INCONCLUSIVE (too few episodes "
         "to tell), 4 ERROR (an episode ended in an error: never green), 2 bad input.\n"
@@ -67,7 +67,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--alpha", type=float, default=None, help="level of the FAIL test (default 0.05)")
     p.add_argument("--failure", default=None,
                    help="what counts as a failure: a comma-separated list of collision, off_road, stall (default: "
-                   "all three; stall: the ego stands with a free road ahead); each kind is also reported apart")
+                   "all three, or the --baseline-report's kinds; stall: the ego stands with a free road ahead); "
+                   "each kind is also reported apart")
     p.add_argument("--stall-seconds", type=float, default=None,
                    help="seconds the ego must stand with a free road ahead for a stall (default 5)")
     worker_backend_option(p, help="local process pool or Ray")
@@ -99,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or DEFAULT_OUT
     episodes, seed = args.episodes, args.seed
     if args.baseline_report:
-        seed, env_config = baseline_defaults(args.baseline_report, seed, env_config)
+        seed, env_config, args.failure = baseline_defaults(args.baseline_report, seed, env_config, args.failure)
     try:
         baseline = args.baseline if not args.baseline_report else BaselineReport(
             args.baseline_report, role=args.baseline_role, accept_failed=args.accept_failed_baseline)

@@ -392,15 +392,17 @@ def _power(tables: Mapping[str, "stats.PairedTable"], margin: float, alpha: floa
 
 
 # ---------------------------------------------------------------------- baseline reports
-def baseline_defaults(path: Union[str, os.PathLike], seed: Optional[int],
-                      env_config: Optional[Dict[str, Any]]) -> Tuple[Optional[int], Optional[Dict[str, Any]]]:
-    """The seed and env config of a run against the baseline report at ``path``: those given, else the report's
-    (by default a run repeats the episodes the baseline ran)."""
-    if seed is not None and env_config is not None:
-        return seed, env_config
+def baseline_defaults(path: Union[str, os.PathLike], seed: Optional[int], env_config: Optional[Dict[str, Any]],
+                      failure: Union[None, str, Sequence[str]] = None
+                      ) -> Tuple[Optional[int], Optional[Dict[str, Any]], Union[None, str, Sequence[str]]]:
+    """The seed, env config and failure kinds of a run against the baseline report at ``path``: those given, else
+    the report's (by default a run repeats the episodes the baseline ran and judges them as it did)."""
+    if seed is not None and env_config is not None and failure is not None:
+        return seed, env_config, failure
     old = load_report(path).settings
     return (old.seed if seed is None else seed,
-            old.env_config if env_config is None else env_config)
+            old.env_config if env_config is None else env_config,
+            (list(old.failure) if old.failure else None) if failure is None else failure)
 
 
 def load_report(path: Union[str, os.PathLike]) -> RegressReport:
@@ -495,6 +497,13 @@ def check_baseline_code(report: RegressReport, *, path: Union[str, os.PathLike],
     """
     theirs = dict(report.code_identity or {})
     their_detectors, our_detectors = dict(theirs.get("detectors") or {}), dict(code_identity.get("detectors") or {})
+    judged = list(report.settings.failure or ()) if report.settings is not None else []
+    missing = [kind for kind in kinds if judged and kind not in judged]
+    if missing:
+        raise ReportMismatchError(
+            f"baseline report {path} was judged on {', '.join(judged)} only, not on {', '.join(missing)}; pass "
+            f"--failure {','.join(judged)} (or leave --failure out: a run against a baseline report judges what it "
+            f"judged), or rerun the baseline with --failure {','.join(kinds)}")
     for kind in kinds:
         if their_detectors.get(kind) != our_detectors.get(kind):
             raise ReportMismatchError(
