@@ -184,14 +184,16 @@ def test_a_policy_option_of_the_wrong_type_is_named():
     assert load_policy("rule?action_noise=0.1&noise_seed=3").base_seed == 3
 
 
-def test_a_run_against_a_baseline_report_repeats_its_seed_and_env_config_unless_given(tmp_path):
+def test_a_run_against_a_baseline_report_repeats_its_seed_env_config_and_failure_kinds_unless_given(tmp_path):
     from dv2s_gym.regress.report import baseline_defaults
 
     path = tmp_path / "report.json"
     path.write_text(json.dumps({"schema": "dv2s-regress", "schema_version": 3,
-                                "settings": {"seed": 7, "env_config": {"duration": 4}, "failure": ["collision", "off_road", "stall"]}}))
-    assert baseline_defaults(path, None, None) == (7, {"duration": 4})
-    assert baseline_defaults(path, 2, None) == (2, {"duration": 4})
-    assert baseline_defaults(path, None, {"duration": 9}) == (7, {"duration": 9})
-    # both given: the report is not read (a missing one is refused later, by the run itself)
-    assert baseline_defaults(tmp_path / "missing.json", 1, {}) == (1, {})
+                                "settings": {"seed": 7, "env_config": {"duration": 4}, "failure": ["collision", "stall"]}}))
+    kinds = ["collision", "stall"]
+    assert baseline_defaults(path, None, None) == (7, {"duration": 4}, kinds)
+    assert baseline_defaults(path, 2, None) == (2, {"duration": 4}, kinds)
+    assert baseline_defaults(path, None, {"duration": 9}) == (7, {"duration": 9}, kinds)
+    assert baseline_defaults(path, 2, {}, "off_road") == (2, {}, "off_road")
+    # all given: the report is not read (a missing one is refused later, by the run itself)
+    assert baseline_defaults(tmp_path / "missing.json", 1, {}, "collision") == (1, {}, "collision")
