@@ -281,7 +281,7 @@ def test_paired_evaluation_runs_identical_episodes_before_and_after(tmp_path):
                              progress=False)
     assert [(r.scenario, r.seed) for r in before] == [(r.scenario, r.seed) for r in after] == episodes
     # same policy, same scene and seed: the very same trajectory, so the pairing is real
-    assert [r.result["trajectory_hash"] for r in before] == [r.result["trajectory_hash"] for r in after]
+    assert [r.result.trajectory_hash for r in before] == [r.result.trajectory_hash for r in after]
     summary = paired_summary(held(before), held(after))
     assert summary.pairs == 4 and summary.table.before_only == summary.table.after_only == 0
     assert summary.mcnemar_p == 1.0
