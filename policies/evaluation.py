@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from policies.registry import Policy, load_policy
+from scenario_bank.records import EpisodeOutcome
 
 __all__ = ["EpisodeResult", "run_episode", "evaluate", "trajectory_hash", "make_eval_env", "SUCCESS_MIN_DISTANCE",
            "EVAL_SEED_BASE", "TRAIN_SEED_LOW"]
@@ -40,7 +41,8 @@ class EpisodeResult:
     ``success`` additionally asks that the ego kept going (at least
     :data:`SUCCESS_MIN_DISTANCE` metres) until the episode ended. ``min_ttc_time`` is when the minimum TTC
     happened [s] and ``min_ttc_with`` the road user it was measured against (``None``: no vehicle was on a
-    collision course); the JSON form (:meth:`to_json`) keeps these two in its ``extra`` object.
+    collision course); the JSON form (:meth:`to_json`) keeps these two in its ``extra`` object. The episode
+    records the files hold keep a result as its typed JSON form, :meth:`to_record`.
     """
 
     scenario: str
@@ -73,6 +75,11 @@ class EpisodeResult:
         data["extra"] = {key: data.pop(key) for key in _IN_EXTRA}
         data["failed"] = self.failed
         return data
+
+    def to_record(self) -> EpisodeOutcome:
+        """The JSON form (:meth:`to_json`) as the typed record an episode record holds as its ``result``; its
+        :meth:`~scenario_bank.records.JsonRecord.to_dict` is :meth:`to_json`, key for key."""
+        return EpisodeOutcome.from_dict(self.to_json())
 
     @classmethod
     def from_json(cls, data: Dict[str, Any]) -> "EpisodeResult":

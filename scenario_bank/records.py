@@ -6,14 +6,14 @@ Five records stand for the JSON objects the subsystems hand each other and write
   seed, generator; for a mined entry also the failure, cluster, reproduction rate, E2E-SC and replay parameters).
 - :class:`Sidecar`: a bank entry's ``meta.json`` (description, elements, story, tags, map, provenance, hash).
 - :class:`EpisodeRecord`: one episode of a failure-mining run, a line of its ``episodes.jsonl`` (the scene, the
-  policy's result and failure, the reference driver's outcome, the sampler's point). Its ``failure`` is a
-  :class:`Failure` (what the failure monitors found) and its ``behaviour`` a :class:`Behaviour` (who else was involved
-  and what each side was doing).
+  policy's result and failure, the reference driver's outcome, the sampler's point). Its ``result`` is an
+  :class:`EpisodeOutcome` (the policy's outcome measures), its ``failure`` a :class:`Failure` (what the failure
+  monitors found) and its ``behaviour`` a :class:`Behaviour` (who else was involved and what each side was doing).
 - :class:`RegressEpisode`: one policy's episode of a regression run, a line of its ``results.jsonl`` and a result
   in its report (the episode's outcome measures, the failure kinds it counts, its trace, or the error it ended in).
 - :class:`HeldOutEpisode`: one episode of a loop's held-out evaluation, a line of a round's ``heldout.jsonl`` (the
-  role and policy, the scene, whether the policy failed and how (a :class:`Failure`), its result, or the error it
-  ended in).
+  role and policy, the scene, whether the policy failed and how (a :class:`Failure`), its result (an
+  :class:`EpisodeOutcome`), or the error it ended in).
 
 Each is a frozen dataclass (a :class:`JsonRecord`) with :meth:`from_dict` (checks every field it knows; a
 :class:`RecordError` names the bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the
@@ -43,8 +43,8 @@ from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_r
 from scenario_bank.story import StoryError, normalize_story
 
 __all__ = ["RecordError", "JsonRecord", "recorded", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode",
-           "HeldOutEpisode", "Failure", "Behaviour", "UNKNOWN_PART", "BEHAVIOUR_PARTS", "SOURCE_KINDS",
-           "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES",
+           "HeldOutEpisode", "Failure", "Behaviour", "EpisodeOutcome", "UNKNOWN_PART", "BEHAVIOUR_PARTS",
+           "SOURCE_KINDS", "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES",
            "SIDECAR_VERSION", "SCRIPT", "SIDECAR", "CONTROL_FIX", "control_character_field", "is_entry_file"]
 
 SCRIPT = "scenario.scenic"
@@ -708,17 +708,64 @@ class Behaviour(JsonRecord):
 
 
 @dataclass(frozen=True, eq=False)
+class EpisodeOutcome(JsonRecord):
+    """The outcome of one episode of one policy as the files hold it: the ``result`` of an episode record
+    (:class:`EpisodeRecord`, :class:`HeldOutEpisode`), the JSON object of
+    :meth:`policies.evaluation.EpisodeResult.to_json` (``EpisodeResult.to_record`` reads it into this record).
+
+    The episode's ``scenario``, env ``seed``, ``scene_seed`` and the script's sampled ``params``; whether the ego
+    ``collided`` and with whom (``collisions``), went ``off_road`` or drove on to a ``success``; the smallest time
+    to collision ``min_ttc`` [s] (``None`` when nothing ever closed in), ``mean_speed`` [m/s], ``distance`` [m],
+    ``episode_return``, ``steps`` and the ``trajectory_hash`` a replay must match; the ``error`` the episode ended
+    in, the result's own ``extra`` object (JSON ``extra``: when and with whom the smallest time to collision came),
+    held here as ``result_extra``, and whether the policy ``failed`` (a collision or leaving the road). Each field
+    is optional: a result read from a file may hold only some (a record written by hand, such as a test's, may
+    hold only its ``trajectory_hash``). Other keys are kept in ``extra``.
+
+    ``null_fields``: the fields written as ``null`` when ``None``; by default every one, as ``to_json`` writes a
+    result.
+    """
+
+    scenario: Optional[str] = None
+    seed: Optional[int] = None
+    scene_seed: Optional[int] = None
+    params: Optional[Mapping[str, Any]] = None
+    collided: Optional[bool] = None
+    collisions: Optional[Tuple[Any, ...]] = None
+    off_road: Optional[bool] = None
+    success: Optional[bool] = None
+    min_ttc: Optional[float] = None
+    mean_speed: Optional[float] = None
+    distance: Optional[float] = None
+    episode_return: Optional[float] = None
+    steps: Optional[int] = None
+    trajectory_hash: Optional[str] = None
+    error: Optional[str] = None
+    result_extra: Optional[Mapping[str, Any]] = None
+    """The result's own ``extra`` object (JSON ``extra``)."""
+    failed: Optional[bool] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _ATTRIBUTES: ClassVar[Dict[str, str]] = {"extra": "result_extra"}
+    _WHAT: ClassVar[str] = "episode result"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+
+@dataclass(frozen=True, eq=False)
 class EpisodeRecord(JsonRecord):
     """One episode of a failure-mining run: a line of the run's ``episodes.jsonl``.
 
     The scene: episode ``index``, ``scenario`` (and its ``family``: the bank scenario it derives from), env
-    ``seed`` and the script's sampled ``params``; the ``policy`` run on it and its ``result``
-    (:meth:`policies.evaluation.EpisodeResult.to_json`), its ``failure`` (``type``, ``kind``, ``time``, ...; ``None``
-    when it drove safely), robustness ``rho``, the reference driver's outcome on the same scene (``reference``,
-    ``avoidable``), the saved ``trace`` of a failed episode (relative to the run folder), ``error`` (the episode
-    could not run: no failure of the policy), a failure's ``behaviour`` (who else was involved and what each side
-    was doing) and ``failure_state`` (the numbers describing the scene at the failure), the
-    ``worker_restarts`` it survived, and the ``sampler`` with the ``point`` and ``proposal`` density it was drawn
+    ``seed`` and the script's sampled ``params``; the ``policy`` run on it and its ``result`` (an
+    :class:`EpisodeOutcome`: :meth:`policies.evaluation.EpisodeResult.to_json`), its ``failure`` (``type``,
+    ``kind``, ``time``, ...; ``None`` when it drove safely), robustness ``rho``, the reference driver's outcome on
+    the same scene (``reference``, ``avoidable``), the saved ``trace`` of a failed episode (relative to the run
+    folder), ``error`` (the episode could not run: no failure of the policy), a failure's ``behaviour`` (who else was
+    involved and what each side was doing) and ``failure_state`` (the numbers describing the scene at the failure),
+    the ``worker_restarts`` it survived, and the ``sampler`` with the ``point`` and ``proposal`` density it was drawn
     from. Other keys are kept in ``extra``.
 
     ``null_fields``: the fields written as ``null`` when ``None``; by default every field but ``behaviour``,
@@ -730,7 +777,7 @@ class EpisodeRecord(JsonRecord):
     seed: int
     policy: Optional[str] = None
     params: Optional[Mapping[str, Any]] = None
-    result: Optional[Mapping[str, Any]] = None
+    result: Optional[EpisodeOutcome] = None
     failure: Optional[Failure] = None
     rho: Optional[float] = None
     reference: Optional[Mapping[str, Any]] = None
@@ -779,13 +826,13 @@ class EpisodeRecord(JsonRecord):
     @property
     def mean_speed(self) -> Optional[float]:
         """The ego's mean speed over the episode (m/s), from its result; ``None`` without one."""
-        value = (self.result or {}).get("mean_speed")
+        value = self.result.mean_speed if self.result is not None else None
         return float(value) if _is_number(value) else None
 
     @property
     def min_ttc(self) -> float:
         """The episode's smallest time to collision (s); infinite when nothing came close or without a result."""
-        value = (self.result or {}).get("min_ttc")
+        value = self.result.min_ttc if self.result is not None else None
         return float(value) if _is_number(value) else math.inf
 
 
@@ -857,9 +904,10 @@ class HeldOutEpisode(JsonRecord):
 
     The ``role`` the policy was evaluated as (``before``, ``after``, ``control``...), the ``policy``, the bank
     ``scenario`` and env ``seed``; whether the policy ``failed`` and its ``failure`` (``type``, ``kind``, ``time``...;
-    ``None`` when it drove safely), its ``result`` (:meth:`policies.evaluation.EpisodeResult.to_json`), or the
-    ``error`` the episode ended in (``failed`` is then ``None``: no failure of the policy). Other keys are kept in
-    ``extra``. Every field is written, ``null`` when ``None``.
+    ``None`` when it drove safely), its ``result`` (an :class:`EpisodeOutcome`:
+    :meth:`policies.evaluation.EpisodeResult.to_json`), or the ``error`` the episode ended in (``failed`` is then
+    ``None``: no failure of the policy). Other keys are kept in ``extra``. Every field is written, ``null`` when
+    ``None``.
     """
 
     role: str
@@ -868,7 +916,7 @@ class HeldOutEpisode(JsonRecord):
     policy: Optional[str] = None
     failed: Optional[bool] = None
     failure: Optional[Failure] = None
-    result: Optional[Mapping[str, Any]] = None
+    result: Optional[EpisodeOutcome] = None
     error: Optional[str] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None

@@ -281,8 +281,8 @@ def test_paired_evaluation_runs_identical_episodes_before_and_after(tmp_path):
                              progress=False)
     assert [(r.scenario, r.seed) for r in before] == [(r.scenario, r.seed) for r in after] == episodes
     # same policy, same scene and seed: the very same trajectory, so the pairing is real
-    assert [r.result["trajectory_hash"] for r in before] == [r.result["trajectory_hash"] for r in after]
-    summary = paired_summary(held(before), held(after))
+    assert [r.result.trajectory_hash for r in before] == [r.result.trajectory_hash for r in after]
+    summary = paired_summary(before, after)
     assert summary.pairs == 4 and summary.table.before_only == summary.table.after_only == 0
     assert summary.mcnemar_p == 1.0
     # a reopened store serves the finished episodes without running them
@@ -314,7 +314,7 @@ def test_paired_summary_counts_and_drop():
 
     before = records([True] * 8 + [False] * 2)
     after = records([True, False, False, False, True, False, False, False, True, False])
-    summary = paired_summary(held(before), held(after))
+    summary = paired_summary(before, after)
     assert summary.to_dict()["before"]["k"] == 8 and summary.to_dict()["after"]["k"] == 3
     assert summary.to_dict()["relative_drop"] == pytest.approx(5 / 8)
     assert summary.to_dict()["table"] == {"both_fail": 2, "after_only": 1, "before_only": 6, "neither": 1}

@@ -51,7 +51,7 @@ def record(user_bank) -> dict:
         env.close()
     record = run_mine_task(MineTask(index=0, policy="keep_lane", scenario=NAME, seed=3,
                                     params={"ego_speed": 23.0, "van_gap": 60.0}, bank_dir=str(user_bank),
-                                    monitor=MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)).to_json())
+                                    monitor=MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)).to_json()).to_dict()
     assert record["error"] is None and record["failure"]["type"] == "collision", record
     return record
 

@@ -539,11 +539,10 @@ _FAILURE_READ_ALLOWED = {
 """Modules that may read a failure by key, with the reason."""
 
 
-def failure_key_reads(source: str) -> List[str]:
-    """The string-key reads of a failure's or a behaviour's JSON keys (``failure["kind"]``, ``record.failure.get(
-    "with")``, ``(record.behaviour or {}).get("actor")``) of a value named like :data:`_HOLDERS` in ``source``."""
-    found = []
-    for node in ast.walk(ast.parse(source)):
+def _key_reads(tree: ast.AST):
+    """``(node, target, key)`` of each string-key read in ``tree`` (``x["key"]``, ``x.get("key")``), ``target`` the
+    value read with ``(x or {})`` and ``dict(x or {})`` taken as ``x``."""
+    for node in ast.walk(tree):
         if isinstance(node, ast.Subscript) and isinstance(node.ctx, ast.Load):
             target, key = node.value, node.slice
         elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get" \
@@ -551,15 +550,52 @@ def failure_key_reads(source: str) -> List[str]:
             target, key = node.func.value, node.args[0]
         else:
             continue
-        if isinstance(target, ast.BoolOp):  # (record.failure or {}).get("type")
-            target = target.values[0]
-        if isinstance(target, ast.Call) and ast.unparse(target.func) == "dict" and target.args:
-            target = target.args[0]  # dict(record.failure or {})
-            target = target.values[0] if isinstance(target, ast.BoolOp) else target
-        name = ast.unparse(target).split(".")[-1]
-        if name in _HOLDERS and isinstance(key, ast.Constant) and key.value in _FAILURE_KEYS:
-            found.append(ast.unparse(node))
-    return found
+        if isinstance(key, ast.Constant) and isinstance(key.value, str):
+            yield node, _unwrapped(target), key.value
+
+
+def _unwrapped(target: ast.expr) -> ast.expr:
+    """``x`` of ``x``, ``(x or {})``, ``dict(x)`` and ``dict(x or {})``."""
+    if isinstance(target, ast.BoolOp):  # (record.failure or {}).get("type")
+        target = target.values[0]
+    if isinstance(target, ast.Call) and ast.unparse(target.func) == "dict" and target.args:
+        target = target.args[0]  # dict(record.failure or {})
+        target = target.values[0] if isinstance(target, ast.BoolOp) else target
+    return target
+
+
+def failure_key_reads(source: str) -> List[str]:
+    """The string-key reads of a failure's or a behaviour's JSON keys (``failure["kind"]``, ``record.failure.get(
+    "with")``, ``(record.behaviour or {}).get("actor")``) of a value named like :data:`_HOLDERS` in ``source``."""
+    return [ast.unparse(node) for node, target, key in _key_reads(ast.parse(source))
+            if ast.unparse(target).split(".")[-1] in _HOLDERS and key in _FAILURE_KEYS]
+
+
+def _is_result(target: ast.expr, aliases: typing.AbstractSet[str]) -> bool:
+    """Whether ``target`` is an episode record's result: ``<x>.result``, or a name bound to one."""
+    return (isinstance(target, ast.Attribute) and target.attr == "result") or (
+        isinstance(target, ast.Name) and target.id in aliases)
+
+
+def result_key_reads(source: str) -> List[str]:
+    """The string-key reads of an episode result's JSON keys (:class:`~scenario_bank.records.EpisodeOutcome`) in
+    ``source``: of ``<x>.result`` (``record.result["trajectory_hash"]``, ``(record.result or {}).get("steps")``) and
+    of a name a function binds to one (``result = record.result or {}`` then ``result.get("params")``)."""
+    from scenario_bank.records import EpisodeOutcome
+
+    keys, tree, found = EpisodeOutcome.json_fields(), ast.parse(source), {}
+    scopes = [(tree, frozenset())]
+    for function in ast.walk(tree):
+        if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            aliases = {t.id for node in ast.walk(function) if isinstance(node, ast.Assign)
+                       and _is_result(_unwrapped(node.value), frozenset())
+                       for t in node.targets if isinstance(t, ast.Name)}
+            scopes.append((function, frozenset(aliases)))
+    for scope, aliases in scopes:
+        for node, target, key in _key_reads(scope):
+            if key in keys and _is_result(target, aliases):
+                found[(node.lineno, node.col_offset)] = ast.unparse(node)
+    return [found[where] for where in sorted(found)]
 
 
 def test_the_failure_read_check_sees_a_failure_read_by_key():
@@ -592,21 +628,58 @@ def test_the_product_reads_failures_and_behaviours_by_their_fields():
         "(self.failure or {}).get('type')"]  # Provenance.failure_type, the one allowed
 
 
-def test_a_failure_and_behaviour_the_miner_writes_read_back_equal(tmp_path):
+def test_the_result_read_check_sees_a_result_read_by_key():
+    planted = textwrap.dedent("""
+        def run(record, episode, settings):
+            result = record.result or {}
+            steps = result.get("steps")
+            return (record.result["trajectory_hash"], (episode.result or {}).get("params"), steps,
+                    dict(record.result or {}).get("min_ttc"), record.result.trajectory_hash,
+                    record.result.get("cluster"), settings["steps"])
+
+        def other(result):
+            return result["steps"], result.get("trajectory_hash")
+    """)
+    assert result_key_reads(planted) == ["result.get('steps')", "record.result['trajectory_hash']",
+                                         "(episode.result or {}).get('params')",
+                                         "dict(record.result or {}).get('min_ttc')"]
+
+
+def test_the_product_reads_episode_results_by_their_fields():
+    """An episode record's result (and a held-out episode's) is a record: no product module reads one by a JSON
+    key."""
+    found = {}
+    for folder in ("dv2s_gym", "policies", "envs", "scenario_bank"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            reads = result_key_reads(path.read_text(encoding="utf-8"))
+            if reads:
+                found[path.relative_to(ROOT).as_posix()] = reads
+    assert not found, f"{found} read an episode result by key: read the record's fields (result.trajectory_hash)"
+
+
+_RESULT_KEYS = ["scenario", "seed", "scene_seed", "params", "collided", "collisions", "off_road", "success", "min_ttc",
+                "mean_speed", "distance", "episode_return", "steps", "trajectory_hash", "error", "extra", "failed"]
+"""The keys of an episode result's JSON object, in the order ``EpisodeResult.to_json`` has always written them."""
+
+
+def test_a_failure_behaviour_and_result_the_miner_writes_read_back_equal(tmp_path):
     """The miner's episode record of a failure (its worker's, written to episodes.jsonl and read back) holds a
-    Failure and a Behaviour, is equal to what was written, and writes back the same bytes, keys in the order the
-    monitors have always written them."""
+    Failure, a Behaviour and an EpisodeOutcome (its result), is equal to what was written, and writes back the same
+    bytes, keys in the order the monitors and ``EpisodeResult.to_json`` have always written them."""
     from dv2s_gym.mining.jsonl import JsonlAppender
     from dv2s_gym.mining.miner import read_records
     from dv2s_gym.mining.monitors import MonitorSettings
     from dv2s_gym.mining.tasks import MineTask, run_mine_task
-    from scenario_bank.records import Behaviour, EpisodeRecord, Failure
+    from scenario_bank.records import Behaviour, EpisodeOutcome, EpisodeRecord, Failure
 
     record = run_mine_task(MineTask(index=0, policy="keep_lane", scenario="urban_lead_vehicle_stopped", seed=0,
                                     reference="rule", monitor=MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0))
                            .to_json())
     assert record.error is None and isinstance(record.failure, Failure) and isinstance(record.behaviour, Behaviour)
     assert record.failure.type == "collision" and record.failure.kind.startswith("collision")
+    assert isinstance(record.result, EpisodeOutcome) and record.result.collided and record.result.failed
+    assert (record.result.scenario, record.result.seed) == ("urban_lead_vehicle_stopped", 0)
+    assert len(record.result.trajectory_hash) == 64 and record.result.steps > 0 and not record.result.extra
     path = tmp_path / "episodes.jsonl"
     appender = JsonlAppender(path)
     appender.append(record)
@@ -615,6 +688,9 @@ def test_a_failure_and_behaviour_the_miner_writes_read_back_equal(tmp_path):
     (read,) = read_records(path)
     assert isinstance(read.failure, Failure) and isinstance(read.behaviour, Behaviour)
     assert read == record and read.failure == record.failure and read.behaviour == record.behaviour
+    assert isinstance(read.result, EpisodeOutcome) and read.result == record.result
+    assert (read.result.trajectory_hash, read.result.min_ttc, read.result.result_extra) == (
+        record.result.trajectory_hash, record.result.min_ttc, record.result.result_extra)
     assert (read.failure.kind, read.failure.with_, read.behaviour.actor) == (
         record.failure.kind, record.failure.with_, record.behaviour.actor)
     assert json.dumps(read.to_dict(), sort_keys=True).encode("utf-8") == written.strip()
@@ -624,8 +700,76 @@ def test_a_failure_and_behaviour_the_miner_writes_read_back_equal(tmp_path):
         assert list(episode.to_dict()["failure"]) == ["type", "time", "step", "with_kind", "collision_type",
                                                       "min_ttc", "speed", "with", "kind"]
         assert list(episode.to_dict()["behaviour"]) == ["actor", "actor_manoeuvre", "ego_manoeuvre"]
+        assert list(episode.to_dict()["result"]) == _RESULT_KEYS
     saved = json.loads(written)
     assert EpisodeRecord.from_dict(saved).to_dict() == saved
+    assert EpisodeOutcome.from_dict(saved["result"]) == read.result
+    assert json.dumps(read.result.to_dict(), sort_keys=True) == json.dumps(saved["result"], sort_keys=True)
+
+
+def test_an_episode_result_s_record_reads_what_to_json_writes():
+    """``EpisodeResult.to_json`` is the result's JSON form; ``EpisodeResult.to_record`` reads it into the record an
+    episode record holds as its ``result``, which writes it back key for key (and ``from_json`` reads it back)."""
+    import math
+
+    from policies.evaluation import EpisodeResult
+    from scenario_bank.records import EpisodeOutcome, EpisodeRecord
+
+    result = EpisodeResult("s", 3, 77, {"gap": 20.0}, True, ["car1"], False, False, math.inf, 12.5, 40.0, -1.5, 25,
+                           "ab" * 32, min_ttc_time=2.4, min_ttc_with="car1")
+    outcome = result.to_record()
+    assert isinstance(outcome, EpisodeOutcome) and outcome.to_dict() == result.to_json()
+    assert list(outcome.to_dict()) == list(result.to_json()) == _RESULT_KEYS
+    assert json.dumps(outcome.to_dict()) == json.dumps(result.to_json())
+    assert (outcome.collided, outcome.collisions, outcome.min_ttc, outcome.failed, outcome.error) == (
+        True, ("car1",), None, True, None)
+    assert outcome.result_extra == {"min_ttc_time": 2.4, "min_ttc_with": "car1"} and not outcome.extra
+    assert EpisodeResult.from_json(outcome.to_dict()) == result
+    record = EpisodeRecord(index=0, scenario="s", seed=3, result=result.to_json())
+    assert record.result == outcome and record.min_ttc == math.inf and record.mean_speed == 12.5
+    assert EpisodeRecord(index=0, scenario="s", seed=3).min_ttc == math.inf
+
+
+def test_an_episode_result_keeps_what_its_json_held():
+    """A result read from a file may hold some of the fields: absent keys stay absent, nulls stay null, other keys
+    travel in ``extra``; a field of the wrong kind is named from the episode record."""
+    from scenario_bank.records import EpisodeOutcome, EpisodeRecord, HeldOutEpisode, RecordError, recorded
+
+    partial = {"min_ttc": None, "steps": 25, "trajectory_hash": "ab", "jerk": 9.5}
+    read = EpisodeOutcome.from_dict(partial)
+    assert read.to_dict() == partial and list(read.to_dict()) == list(partial)
+    assert (read.steps, read.trajectory_hash, read.min_ttc, read.scenario, read.extra) == (
+        25, "ab", None, None, {"jerk": 9.5})
+    assert not recorded(EpisodeOutcome.from_dict({})) and recorded(read)
+    episode = {"index": 0, "scenario": "s", "seed": 3, "result": partial}
+    assert EpisodeRecord.from_dict(episode).result == read
+    assert EpisodeRecord.from_dict(episode).to_dict()["result"] == partial
+    held = HeldOutEpisode.from_dict({"role": "before", "scenario": "s", "seed": 3, "result": partial})
+    assert held.result == read and held.to_dict()["result"] == partial
+    with pytest.raises(RecordError, match="episode record field 'result.steps' must be an integer, not str"):
+        EpisodeRecord.from_dict({**episode, "result": {"steps": "25"}})
+    with pytest.raises(RecordError, match="held-out episode field 'result' must be a JSON object, not list"):
+        HeldOutEpisode.from_dict({"role": "before", "scenario": "s", "seed": 3, "result": [1]})
+
+
+def test_a_held_out_episode_s_result_reads_back_equal(tmp_path):
+    """A held-out episode (its worker's, saved to heldout.jsonl and read back) holds its result as an
+    EpisodeOutcome, equal to what was written and written back as the same bytes."""
+    from dv2s_gym.loop.heldout import HeldOutStore
+    from dv2s_gym.mining.tasks import heldout_task
+    from scenario_bank.records import EpisodeOutcome
+
+    episode = heldout_task({"role": "before", "policy": "keep_lane", "scenario": "urban_lead_vehicle_stopped",
+                            "seed": 0})
+    assert episode.error is None and isinstance(episode.result, EpisodeOutcome)
+    assert episode.failed and episode.result.collided and len(episode.result.trajectory_hash) == 64
+    assert list(episode.to_dict()["result"]) == _RESULT_KEYS
+    store = HeldOutStore(tmp_path / "heldout.jsonl")
+    store.append(episode)
+    written = store.path.read_bytes()
+    read = HeldOutStore(store.path).get("before", "urban_lead_vehicle_stopped", 0)
+    assert read == episode and isinstance(read.result, EpisodeOutcome) and read.result == episode.result
+    assert json.dumps(read.to_dict(), sort_keys=True).encode("utf-8") == written.strip()
 
 
 def test_a_failure_and_behaviour_keep_what_their_json_held():

@@ -183,7 +183,7 @@ def test_mining_on_ray_equals_mining_locally(ray_address, tmp_path):
                   env_config={"duration": 5}, progress=False, reports=False, policy="keep_lane", batch=4)
     local = mine(out=tmp_path / "local", workers=2, **common)
     remote = mine(out=tmp_path / "ray", backend="ray", address=ray_address, workers=2, **common)
-    key = lambda run: [(r.index, r.seed, r.params, r.result["trajectory_hash"], r.avoidable)  # noqa: E731
+    key = lambda run: [(r.index, r.seed, r.params, r.result.trajectory_hash, r.avoidable)  # noqa: E731
                        for r in run.records]
     assert key(remote) == key(local)
     failed = [r for r in remote.records if r.failure]

@@ -68,7 +68,7 @@ def _replay_mined(args: argparse.Namespace, folder) -> int:
     record, policy = replay_mined_episode(folder, args.episode, policy=args.policy_spec, video=args.video)
     failure = record.failure
     print(f"episode {record.index} ({record.scenario}, seed {record.seed}): {policy} re-run "
-          f"with the recorded parameters; trajectory hash {record.result['trajectory_hash'][:16]} matches the record"
+          f"with the recorded parameters; trajectory hash {record.result.trajectory_hash[:16]} matches the record"
           + (f"; failure {failure.kind} at {failure.time} s" if failure is not None else "")
           + (f"; video {args.video}" if args.video else ""))
     return 0

@@ -12,7 +12,7 @@ from dv2s_gym.mining.miner import read_records
 from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
 from envs.recording import write_frames
 from envs.trace_bounds import check_file_config
-from scenario_bank.records import EpisodeRecord
+from scenario_bank.records import EpisodeRecord, recorded
 from policies.registry import spec_from_file
 
 __all__ = ["replay_mined_episode"]
@@ -42,7 +42,7 @@ def replay_mined_episode(folder: PathLike, episode: Optional[str], *, policy: Op
     settings_file = str(settings.path)
     records = {int(r.index): r for r in read_records(folder / "episodes.jsonl")}
     record = records.get(int(episode))
-    if record is None or record.error or not record.result:
+    if record is None or record.error or not recorded(record.result):
         raise MiningError(f"episode {episode} of {folder} did not finish (not in episodes.jsonl, or an error); "
                          f"it has episodes 0..{max(records) if records else -1}")
     if not policy:

@@ -155,7 +155,7 @@ def run_mine_task(task: Mapping[str, Any]) -> EpisodeRecord:
         _check_detects(mine.failure_types)
         result, trace = _episode(mine, mine.policy)
         failure = detect_failure(result, trace, mine.monitor)
-        outcome["result"] = result.to_json()
+        outcome["result"] = result.to_record()
         outcome["failure"] = failure
         outcome["rho"] = robustness(result, failure, mine.monitor)
         if failure is not None:
@@ -187,7 +187,7 @@ def _reference_outcome(task: MineTask) -> Tuple[Dict[str, Any], Optional[Failure
     ref_failure = detect_failure(ref_result, ref_trace, task.monitor)
     return {"policy": task.reference, "failure": ref_failure.to_json() if ref_failure else None,
             "trajectory_hash": ref_result.trajectory_hash, "collided": ref_result.collided,
-            "min_ttc": ref_result.to_json()["min_ttc"]}, ref_failure
+            "min_ttc": ref_result.to_record().min_ttc}, ref_failure
 
 
 def _check_detects(names) -> None:
@@ -225,7 +225,7 @@ def heldout_task(task: Mapping[str, Any]) -> HeldOutEpisode:
         if env_key is not None:
             worker_cache.drop_env(env_key)
         return episode.replace(error=" ".join(f"{type(error).__name__}: {error}".split()))
-    return episode.replace(failed=failure is not None, failure=failure, result=result.to_json())
+    return episode.replace(failed=failure is not None, failure=failure, result=result.to_record())
 
 
 register(MINE, run_mine_task)

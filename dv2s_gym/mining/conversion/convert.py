@@ -109,6 +109,12 @@ def _family(parent: str, failure_type: str):
     return same
 
 
+def _failing_params(record: EpisodeRecord) -> Mapping[str, Any]:
+    """The failing episode's sampled parameters: its result's (as the env reported them), else the record's."""
+    reported = record.result.params if record.result is not None else None
+    return reported or record.params or {}
+
+
 def _portable_params(params: Mapping[str, Any]) -> Dict[str, Any]:
     """The sampled parameters as the bank keeps them: a map given by a path becomes its file name (the
     entry's ``map`` names it; shipped maps are found by name), so no path into this machine is kept."""
@@ -364,8 +370,7 @@ class _Conversion:
         out, record = self.out, self.record
         out["actors"] = compare_actors(actor_census(self.source_trace), [actor_census(t) for t in self.traces],
                                        self.interaction.kind)
-        out["parameters"] = compare_parameters((record.result or {}).get("params") or record.params or {},
-                                               self.generation.script,
+        out["parameters"] = compare_parameters(_failing_params(record), self.generation.script,
                                                parent=parent_script(record.scenario, self.settings.bank_dir),
                                                interaction=self.interaction)
         # the judge: every check that failed is recorded; the first one is the rejection's stage
@@ -430,10 +435,9 @@ class _Conversion:
     def _provenance(self) -> Provenance:
         """The kept script's ``mined`` provenance."""
         out, record, s = self.out, self.record, self.settings
-        result = record.result or {}
         return Provenance(
             kind="mined", parent=record.scenario, seed=int(record.seed),
-            params=_portable_params(result.get("params") or record.params or {}),
+            params=_portable_params(_failing_params(record)),
             video=ENTRY_VIDEO, trace=ENTRY_TRACE,
             **conversion_provenance(s.dra, s.sg, self.generation, self.description),
             backends={"dra": s.dra, "sg": s.sg},

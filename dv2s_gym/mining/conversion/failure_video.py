@@ -231,7 +231,7 @@ def rerun_failure(record: Union[EpisodeRecord, Mapping[str, Any]], *, policy: An
         config.update(camera or {})
     env = make_eval_env([record.scenario], config=config, bank_dir=str(bank_dir) if bank_dir else None,
                         render_mode="rgb_array" if render else None)
-    expected = record.result["trajectory_hash"]
+    expected = record.result.trajectory_hash
     scene = _Scene(record.scenario, int(record.seed), record.params or {})
     return _checked_run(env, policy, scene, render, extra_steps, expected,
                         lambda got: (f"the replay of episode {record.index} ({record.scenario}, seed "
@@ -411,7 +411,7 @@ def _record_clip(record: EpisodeRecord, settings: VideoSettings) -> tuple:
     if settings.policy is None:
         raise FailureReplayError("re-running a failure record needs the policy that failed (policy=...)")
     frequency = _frequency({**VIDEO_CONFIG, **dict(settings.env_config or {})})
-    steps = int((record.result or {}).get("steps") or 0)
+    steps = int(record.result.steps or 0) if record.result is not None else 0
     k = failure_step(record.failure, steps, frequency)
     stall = record.failure is not None and record.failure.type == "stall"
     span = _stall_span(settings, frequency) if stall else 0  # an upper bound of the stall's frames

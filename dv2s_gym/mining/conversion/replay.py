@@ -73,7 +73,7 @@ def add_replay(record: EpisodeRecord, bank, settings: ConversionSettings, source
     params = dict(record.params or {})
     script, intervals, not_narrowed, trace, failure, source = _run_narrowed(record, parent, params, settings, source)
     replay = {"params": params, "intervals": intervals, "not_narrowed": not_narrowed, "seed": int(record.seed),
-              "trajectory_hash": record.result["trajectory_hash"],
+              "trajectory_hash": record.result.trajectory_hash,
               "policy": policy_name(settings.policy), **replay_versions(settings.policy)}
     out = {"entry": None, **replay, "failure": failure.to_dict() if failure is not None else None, "note": None,
            "e2e_sc": e2e_sc(elements_from_trace(source.source_trace), elements_from_trace(trace))}
@@ -88,7 +88,7 @@ def _run_narrowed(record: EpisodeRecord, parent: Any, params: Dict[str, Any], se
     trace. A replay that diverges is a ``replay`` rejection."""
     script, intervals, not_narrowed = narrowed_script(parent.script, params)
     seed = int(record.seed)
-    expected = record.result["trajectory_hash"]
+    expected = record.result.trajectory_hash
     folder = source.run_dir / "failures" / cluster_slug(source.cluster, record.index) / CONVERSION_DIR
     path = folder / "replay.scenic"
     write_run_file(path, script)
@@ -182,7 +182,7 @@ def replay_failure_entry(record: EpisodeRecord, run_dir: PathLike, settings: Con
         failure = record.failure
         if failure is None or not failure.type:
             raise ConversionRejected("input", "the record holds no failure (its 'failure' is empty)")
-        if not (record.result or {}).get("trajectory_hash"):
+        if record.result is None or not record.result.trajectory_hash:
             raise ConversionRejected("input", "the record holds no trajectory hash to check the replay against")
         if isinstance(bank, (str, os.PathLike)):
             bank = Bank(bank)
