@@ -92,3 +92,32 @@ def test_no_warning_is_left_over():
     with warnings.catch_warnings():
         warnings.simplefilter("error", BuiltInReplacedWarning)
         assert not [entry for entry in replaced_built_ins() if "collision" in entry]
+
+
+def collision_as_json(result, trace, settings):
+    """A plug-in's collision detector returning the failure's JSON object, not a ``Failure``."""
+    return {"type": "collision", "time": 0.4, "step": 2} if result.collided else None
+
+
+def test_a_detector_returning_no_failure_record_is_named_with_the_fix(monkeypatch):
+    """A detector's result that is not a ``Failure`` (nor ``None``) is refused where it is asked, naming the
+    detector, its module, what it returned and the fix; not read as a record, and not an AttributeError later."""
+    table = monitors.DETECTORS.copy()
+    monkeypatch.setattr(monitors, "DETECTORS", table)
+    with pytest.warns(BuiltInReplacedWarning):
+        monitors.register_detector(monitors.Detector("collision", collision_as_json, table["collision"].score),
+                                   overwrite=True)
+    try:
+        episode = _episode([10.0, 9.0, 8.0], collided=True, collisions=["Car1"])
+        with pytest.raises(monitors.DetectorResultError) as raised:
+            monitors.detect_failure(*episode)
+        message = str(raised.value)
+        assert f"detector of failure type 'collision' (module {collision_as_json.__module__}) returned a dict" \
+            in message
+        assert "return Failure('collision', time, step, ...)" in message and "docs/mining.md" in message
+        with pytest.raises(monitors.DetectorResultError, match="failure type 'collision' .* returned a dict"):
+            _regress(monkeypatch, episode)  # regress's worker asks the same detector: the same error
+        assert monitors.detect_failure(*_episode([10.0, 9.0, 8.0])) is None  # None stays the answer for no failure
+    finally:
+        monitors.unregister_detector("collision")
+        table.mark_built_in()

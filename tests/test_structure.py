@@ -8,7 +8,8 @@ else to ``a.b``), and so is a module loaded by name: through ``importlib.import_
 command. Function-level imports count: a deferred import still ties the
 two modules together, it only hides the cycle from Python's import machinery. A loader given a name that is not a
 literal string (or reached another way than by a call: ``getattr(importlib, "import_module")``) is refused unless
-:data:`COMPUTED_LOADS` lists its module with the reason. Whatever the call, a string naming a project module
+:data:`COMPUTED_LOADS` lists its module with the reason; so is any other reference to a loader or to a module holding
+loaders, however spelled (a string naming a loader, ``__builtins__``, ``vars(importlib)``: :func:`_loader_references`). Whatever the call, a string naming a project module
 (``"pkg.mod"``, ``"pkg.mod:attr"``, ``"pkg.mod.attr"``, ``"-mpkg.mod"``, a ``"pkg."`` prefix) is an edge
 (:func:`modules_named_in_strings`: ``pydoc.locate``, ``mock.patch``, ``importlib.resources.files``, a forkserver
 preload list...), as is the ``dv2s`` console script started in a child process (``dv2s_gym.cli``); a string that
@@ -149,6 +150,13 @@ def _loader_uses(tree: ast.AST, processes: bool = True) -> tuple:
     other_names, other_computed = _other_loads(nodes)
     names += other_names
     computed += other_computed
+    reference_names, reference_computed = _loader_references(tree, nodes)
+    names = list(dict.fromkeys(names + reference_names))  # a call two readers know is read once
+    seen = {line.partition(":")[0] for line in computed}  # a line already refused is shown once
+    for line in reference_computed:
+        if line.partition(":")[0] not in seen:
+            seen.add(line.partition(":")[0])
+            computed.append(line)
     if processes:
         computed += _commands_with_computed_code(tree)
     return names, computed
@@ -224,6 +232,96 @@ def _other_loads(nodes: List[ast.AST]) -> tuple:
             names.append(_module_of_path(value) if how == "path" else value.partition(":")[0])
         else:
             computed.append(f"{node.lineno}: {ast.unparse(node)}")
+    return names, computed
+
+
+_LOADER_NAMES = frozenset({"import_module", "__import__", "run_module", "resolve_name", "locate", "get_loader",
+                           "run_path", "find_spec", "find_loader", "find_module", "load_module",
+                           "spec_from_file_location", "spec_from_loader", "module_from_spec", "exec_module"})
+"""The functions that load (or find) a module by its name or its file. Called by that name with a literal module
+name, what they load is read; any other reference to one hides it (:func:`_loader_references`)."""
+_NAMESPACES = frozenset({"importlib", "pkgutil", "runpy", "pydoc", "zipimport", "sys", "builtins", "__builtins__"})
+"""Modules that hold loaders (or the table of loaded modules). Used by a named attribute they are read as such; used
+any other way (passed on, ``vars()``, ``getattr`` with a computed name, ``operator.attrgetter(...)(importlib)``)
+they reach a loader unseen. ``builtins`` and ``__builtins__`` are used only to call a code runner or a loader."""
+_NAMESPACE_ESCAPES = frozenset({"__dict__", "__getattribute__", "__getattr__", "__loader__", "__spec__"})
+"""Attributes of a namespace module that reach all of its names (``importlib.__dict__.get("import_module")``)."""
+
+
+def _namespace_names(nodes: List[ast.AST]) -> tuple:
+    """``(namespaces, loaders)``: the names bound to a module of :data:`_NAMESPACES` (``import importlib.util as u``,
+    ``from importlib import util``; ``__builtins__`` always) and to a loader imported by name (``from pkgutil import
+    resolve_name as r``)."""
+    namespaces = {"__builtins__": "__builtins__"}
+    loaders = set()
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            namespaces.update({alias.asname or alias.name.split(".")[0]: alias.name.split(".")[0]
+                               for alias in node.names if alias.name.split(".")[0] in _NAMESPACES})
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] in _NAMESPACES:
+            for alias in node.names:
+                if alias.name in _LOADER_NAMES:
+                    loaders.add(alias.asname or alias.name)
+                elif alias.name in ("util", "machinery"):
+                    namespaces[alias.asname or alias.name] = node.module.split(".")[0]
+    return namespaces, loaders
+
+
+def _loader_references(tree: ast.AST, nodes: List[ast.AST]) -> tuple:
+    """``(names, computed)`` for every reference to a loader (:data:`_LOADER_NAMES`) or a module holding loaders
+    (:data:`_NAMESPACES`), whatever its spelling: a loader called by its name, an attribute of that name or
+    ``getattr(x, "loader")`` with a literal module name is read (that name); a string constant equal to a loader's
+    name or a dotted path ending in one (``getattr(pkgutil, "resolve_name")``, ``operator.attrgetter(
+    "import_module")``, ``pydoc.locate("importlib.import_module")``), a loader's attribute or imported name not
+    called, and a namespace module used other than by a named attribute (``__builtins__.get("__import__")``,
+    ``vars(importlib)``, ``attrgetter(...)(importlib)``) are lines (``"line: code"``) where what is loaded is not
+    visible."""
+    namespaces, loaders = _namespace_names(nodes)
+    parents = {id(child): node for node in nodes for child in ast.iter_child_nodes(node)}
+    called = {id(node.func): node for node in nodes if isinstance(node, ast.Call)}
+    allowed = _RUNNERS | _LOADER_NAMES
+
+    def loader_of(node: ast.AST) -> bool:
+        if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1:
+            return isinstance(node.args[1], ast.Constant) and node.args[1].value in _LOADER_NAMES
+        return getattr(node, "attr", None) in _LOADER_NAMES or getattr(node, "id", None) in loaders
+
+    names: List[str] = []
+    exempt = set()
+    computed: List[str] = []
+    for node in nodes:
+        if isinstance(node, ast.Call) and loader_of(node.func):
+            argument = node.args[0] if node.args else None
+            if isinstance(argument, ast.Constant) and isinstance(argument.value, str):
+                names.append(_module_of_path(argument.value) if argument.value.endswith(".py")
+                             else argument.value.partition(":")[0])
+                if isinstance(node.func, ast.Call):
+                    exempt.add(id(node.func.args[1]))  # getattr(importlib, "import_module")("pkg.mod")
+            else:
+                computed.append(f"{node.lineno}: {ast.unparse(node)}")
+    skipped = text_only_strings(tree) | exempt
+    for node in nodes:
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skipped:
+            if set(re.split(r"[.:]", node.value)) & _LOADER_NAMES:
+                computed.append(f"{node.lineno}: {node.value!r}")
+        elif isinstance(node, (ast.Attribute, ast.Name)) and loader_of(node) and id(node) not in called \
+                and isinstance(node.ctx, ast.Load):
+            computed.append(f"{node.lineno}: {ast.unparse(node)}")
+        elif isinstance(node, ast.Name) and node.id in namespaces and isinstance(node.ctx, ast.Load):
+            parent = parents.get(id(node))
+            builtin = namespaces[node.id] in _BUILTINS
+            if isinstance(parent, ast.Attribute):
+                used = parent.attr if not builtin or (id(parent) in called and parent.attr in allowed) else None
+            elif isinstance(parent, ast.Call) and getattr(parent.func, "id", None) in ("getattr", "hasattr") \
+                    and parent.args[:1] == [node] and len(parent.args) > 1 and isinstance(parent.args[1], ast.Constant):
+                value = parent.args[1].value
+                used = value if not builtin or (id(parent) in called and value in allowed) else None
+            elif isinstance(parent, ast.Subscript) and isinstance(parent.slice, ast.Constant) and builtin:
+                used = parent.slice.value if id(parent) in called and parent.slice.value in allowed else None
+            else:
+                used = "" if isinstance(parent, ast.Call) and getattr(parent.func, "id", None) == "dir" else None
+            if used is None or used in _NAMESPACE_ESCAPES:
+                computed.append(f"{node.lineno}: {ast.unparse(parent or node)}")
     return names, computed
 
 
@@ -332,6 +430,8 @@ COMPUTED_LOADS: Dict[str, str] = {
     "scenario_bank.jail.process": "JailedProcess starts the worker module its caller names (read where it is "
                                   "called: JailedProcess(\"pkg.mod\"))",
     "scenario_bank.sandbox": "the simulator's worker module, named to it by envs (simulator_worker())",
+    "policies.run_identity": "importlib.util.find_spec of a module a policy spec or a plug-in registration names, "
+                             "to hash its file (it imports the module's parent packages)",
     "scenario_bank.plugins": "the user's plug-in modules (the modules that registered a failure type or detector, "
                              "or DV2S_PLUGINS), which every worker process imports",
 }
@@ -356,7 +456,8 @@ def _dynamic_imports(path: Path, module: str, modules: Dict[str, Path], processe
     names = [name.partition(":")[0] for name in names]
     names = [_resolve(name, modules) or name if name.split(".")[0] in PACKAGES else name for name in names]
     if computed:
-        names += [text.partition(":")[0] for text in _folded_strings(tree)]
+        names += [name for text in _folded_strings(tree)
+                  if (module, name := text.partition(":")[0]) not in NAMED_NOT_LOADED]
     names += _modules_run_by_commands(tree) if processes else []
     names += [name for name, line in modules_named_in_strings(tree, modules, processes)
               if (module, name) not in NAMED_NOT_LOADED]
@@ -646,6 +747,8 @@ def test_the_graph_sees_an_import_planted_in_code_run_from_a_string(tmp_path, ta
     ('import pickle\n    pickle.loads(b"cdv2s_gym.report_page\\n__name__\\n.")', "dv2s_gym.report_page"),
     ('import sys\n    return sys.modules["dv2s_gym.cli"]', "dv2s_gym.cli"),
     ('from sys import modules\n    return modules.get("dv2s_gym.story")', "dv2s_gym.story"),
+    ('import pkgutil\n    return getattr(pkgutil, "resolve_name")("dv2s_gym.story:main")', "dv2s_gym.story"),
+    ('from importlib.util import find_spec\n    return find_spec("dv2s_gym.story")', "dv2s_gym.story"),
 ])
 def test_the_graph_sees_a_module_reached_by_other_loaders(tmp_path, planted, loaded):
     """envs may not load dv2s_gym: a module resolved by name, a file run by path, a child Python given code, an
@@ -662,9 +765,25 @@ def test_the_graph_sees_a_module_reached_by_other_loaders(tmp_path, planted, loa
     'pkgutil.get_loader(name)',
     'runpy.run_path(name)',
     'sys.modules[name]',
+    # a loader reached by its name in a string, or through a namespace module used as a value
+    'getattr(pkgutil, "resolve_name")(name)',
+    'operator.attrgetter("import_module")(importlib)(name)',
+    '__builtins__.get("__import__")(name)',
+    'getattr(pkgutil, "resolve_name")("dv2s_gymXloop.run:run_loop".replace("X", "."))',
+    'operator.attrgetter("import_module")(importlib)("dv2s_gymXmining.miner".replace("X", "."))',
+    '__builtins__.get("__import__")("json")',
+    'operator.methodcaller("resolve_name", name)(pkgutil)',
+    'pydoc.locate("importlib.import_module")(name)',
+    'load = importlib.util.find_spec',
+    'operator.attrgetter(name)(importlib)',
+    'vars(pkgutil)[name]',
+    'builtins.getattr(importlib, name)',
+    '__builtins__["__import__"](name)',
+    'importlib.util.spec_from_file_location(name, "x.py")',
 ])
 def test_a_computed_name_given_to_another_loader_is_refused(planted):
-    tree = ast.parse(f"import pkgutil, pydoc, runpy, subprocess, sys\ndef f(name):\n    {planted}\n")
+    tree = ast.parse("import builtins, importlib, importlib.util, operator, pkgutil, pydoc, runpy, subprocess, sys\n"
+                     f"def f(name):\n    {planted}\n")
     assert [line.partition(":")[0] for line in _loader_uses(tree)[1]] == ["3"]
 
 

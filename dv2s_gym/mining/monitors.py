@@ -34,6 +34,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 from envs.safety_metrics import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, FREE_PATH, STANDING_SPEED,
                                  MonitorSettings, first_stall_step)
 from scenario_bank.elements import ActorKind
+from scenario_bank.errors import DV2SError
 from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, UnknownDetectorError, attach_detection,
                                           detach_detection, failure_table, failure_type, type_label)
 from scenario_bank.named_registry import Registry
@@ -41,7 +42,7 @@ from scenario_bank.plugins import forget_plugin, remember_plugin
 from scenario_bank.records import Failure
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "COLLISION_LABELS", "kind_label", "MonitorSettings",
-           "Detector", "DETECTORS", "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
+           "Detector", "DetectorResultError", "DETECTORS", "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
            "robustness", "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
 
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
@@ -103,6 +104,27 @@ class Detector:
     name: str
     detect: Callable[[Any, Any, MonitorSettings], Optional[Failure]]
     score: Callable[[Any, Failure, MonitorSettings], float]
+
+
+class DetectorResultError(DV2SError, TypeError):
+    """A detector's ``detect`` returned something other than a :class:`Failure` or ``None``."""
+
+
+def _detected(detector: Detector, result, trace, settings: MonitorSettings) -> Optional[Failure]:
+    """``detector.detect(result, trace, settings)``, checked: a :class:`Failure` or ``None``.
+
+    Raises:
+        DetectorResultError: naming the detector, its module, what it returned and the fix. A failure's JSON
+            object (what ``episodes.jsonl`` shows) is refused too, not read: the detector's contract is the record.
+    """
+    failure = detector.detect(result, trace, settings)
+    if failure is None or isinstance(failure, Failure):
+        return failure
+    module = getattr(detector.detect, "__module__", None) or "unknown"
+    raise DetectorResultError(
+        f"the detector of failure type {detector.name!r} (module {module}) returned a {type(failure).__name__}, not "
+        f"a dv2s_gym.mining.monitors.Failure (or None): return Failure({detector.name!r}, time, step, ...) when "
+        "the episode has the failure, None otherwise (docs/mining.md, 'Adding a failure type')")
 
 
 def _time_of(trace, step: int) -> float:
@@ -199,8 +221,8 @@ def register_detector(detector: Detector, overwrite: bool = False) -> Detector:
     module = getattr(detector.detect, "__module__", None)
     DETECTORS.register(detector.name, detector, overwrite=overwrite, module=module)
     remember_plugin(_plugin_name(detector.name), module)
-    attach_detection(detector.name, lambda result, trace, settings: detector.detect(
-        result, trace, MonitorSettings.of(settings)) is not None, module)
+    attach_detection(detector.name, lambda result, trace, settings: _detected(
+        detector, result, trace, MonitorSettings.of(settings)) is not None, module)
     return detector
 
 
@@ -234,7 +256,7 @@ def detect_failure(result, trace, settings: MonitorSettings = DEFAULT_MONITOR) -
     if result.error is not None:
         return None
     for row in failure_table():
-        failure = _detector(row.name).detect(result, trace, settings)
+        failure = _detected(_detector(row.name), result, trace, settings)
         if failure is not None:
             return failure
     return None

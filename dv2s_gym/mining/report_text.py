@@ -154,8 +154,8 @@ def error_warning(errors: int, episodes: int, first: str) -> str:
     """The loud line for a run with ``errors`` of its ``episodes`` ended in an error (``first``: one's message)."""
     what = (f"all {episodes} episodes ended in an error: the run measured nothing" if errors == episodes else
             f"{errors} of {episodes} episodes ended in an error and count in no failure figure")
-    return (f"WARNING: {what} (e.g. {first}); the report's Errors section lists them: fix the policy or scenario "
-            "and rerun")
+    return (f"WARNING: {what} (e.g. {first}); the report's Errors section lists them: fix what they name (the "
+            "policy, the scenario or a plug-in) and rerun")
 
 
 def parameter_check_text(counts: MineCounts) -> str:
