@@ -130,7 +130,7 @@ def test_every_cluster_of_a_mining_run_gets_its_replay_once(tmp_path):
     assert len((run_dir / REPLAYS_FILE).read_text().splitlines()) == len(clusters)
     entries = replay_entries(run_dir)
     kept = {r["replay_entry"] for r in rows if r["replay_entry"]}
-    assert {e["scenario"] for e in entries} == kept and {e["parent"] for e in entries} == {SCENARIO}
+    assert {e.scenario for e in entries} == kept and {e.parent for e in entries} == {SCENARIO}
     bank = Bank(tmp_path / "bank")
     assert all(replay_failure(bank, name).get("matches") for name in kept)
 

@@ -219,6 +219,7 @@ def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_pat
     from dv2s_gym.loop.report import round_clips
     from dv2s_gym.mining.report import build_report_from_records
 
+    conversion, out = out, out.to_dict()  # the record for the product, its JSON object for the checks
     seed = out["reproduction"]["clip"]["seed"]
     loop = {"settings": {"bank_dir": str(tmp_path / "bank"), "policy": "keep_lane"}, "policy": "keep_lane",
             "rounds": [{"round": 1, "steps": {"mine": {"folder": str(tmp_path / "run"), "kept": [
@@ -245,7 +246,7 @@ def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_pat
     assert f"driven by keep_lane, seed {seed}: it failed" in from_run[1]["label"]  # the round's policy, named
 
     mining = build_report_from_records({"policy": "keep_lane", "sampler": "uniform"},
-                                       [EpisodeRecord.from_dict(record)], [out], {record["index"]: out["cluster"]})
+                                       [EpisodeRecord.from_dict(record)], [conversion], {record["index"]: out["cluster"]})
     card = render_html(mining, base=tmp_path / "run", page_dir=tmp_path / "run", embed_videos=False)
     card = card.split(f'id="card-{out["cluster"]}"')[1].split('class="text"')[0]
     assert f'src="failures/{SCENARIO}__collision__0/failure.webm"' in card
@@ -360,7 +361,7 @@ def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
                bank_dir=str(tmp_path / "bank"), workers=1, reference=None, progress=False, convert=True,
                max_conversions=1, reports=False)
     rows = [json.loads(line) for line in (tmp_path / "run" / "conversions.jsonl").read_text().splitlines()]
-    assert len(rows) == 1 and rows[0] == run.conversions[0]
+    assert len(rows) == 1 and rows[0] == run.conversions[0].to_dict()
     row = rows[0]
     assert CONTRACT_KEYS <= set(row), row
     assert (tmp_path / "run" / row["video"]).is_file() and (tmp_path / "run" / row["script"]).is_file()
@@ -417,7 +418,7 @@ def test_a_run_killed_between_the_bank_write_and_its_record_resumes_without_a_se
     assert len(replays) == 1 and Bank(tmp_path / "bank").get(replays[0]).source.converted == mined[0]
 
     resumed = mine("keep_lane", **run)
-    row = resumed.conversions[0]
+    row = resumed.conversions[0].to_dict()
     assert len(resumed.conversions) == 1 and row["status"] == "kept" and row["bank_entry"] == mined[0], row
     entry = Bank(tmp_path / "bank").get(mined[0])
     assert _converted(tmp_path / "bank") == mined
@@ -445,7 +446,7 @@ def test_an_unreachable_model_endpoint_stops_converting_and_the_rerun_converts(t
         mine("keep_lane", conversion=down, **run)
     assert not (tmp_path / "run" / "conversions.jsonl").read_text().strip()
     assert len((tmp_path / "run" / "episodes.jsonl").read_text().splitlines()) == 4
-    rows = mine("keep_lane", conversion=ConversionSettings(dra="bev"), **run).conversions
+    rows = [row.to_dict() for row in mine("keep_lane", conversion=ConversionSettings(dra="bev"), **run).conversions]
     assert len(rows) == 1 and rows[0]["stage"] != "describe" and rows[0]["status"] == "kept", rows
 
 

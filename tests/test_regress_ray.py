@@ -161,7 +161,8 @@ def test_run_regression_on_the_cluster_equals_the_local_run(ray_address, tmp_pat
     assert not ray.is_initialized()  # the backend disconnected when the run ended
 
     def hashes(report):
-        return {(e["id"], role): e[role]["trajectory_hash"] for e in report["episodes"] for role in ("candidate", "baseline")}
+        return {(e["id"], role): e[role]["trajectory_hash"] for e in report.to_dict()["episodes"]
+                for role in ("candidate", "baseline")}
 
     assert hashes(on_ray) == hashes(local) and len(hashes(local)) == 12
     assert on_ray.to_dict()["verdict"] == local.to_dict()["verdict"] and on_ray.to_dict()["newly_failing"] == local.to_dict()["newly_failing"]
