@@ -28,7 +28,8 @@ from scenario_bank.errors import DV2SError
 
 __all__ = ["RunIdentityError", "identity_of", "differing", "check_identity", "setting", "resume_keys",
            "recorded_settings", "record_format", "check_format", "FORMAT_KEYS", "BANK_IDENTITY", "bank_identity",
-           "check_bank_unchanged", "RUN_KINDS", "check_run_kind"]
+           "check_bank_unchanged", "RUN_KINDS", "CONVERSION_KIND", "CONVERSION_KEYS",
+           "check_run_kind"]
 
 _SHOWN = 3
 """Differences spelled out in a refusal (the rest are counted)."""
@@ -131,10 +132,27 @@ def check_format(record: Any, schema: str, version: int, *, folder: Any, what: s
                 f"this dv2s-gym reads format {version}); start a new --out folder")
 
 
+CONVERSION_KIND = "dv2s-conversion"
+"""The :data:`RUN_KINDS` key of a D-V2S conversion folder (``dv2s generate``, ``dv2s convert``): its record is its
+``report.json``, known by its shape (:data:`CONVERSION_KEYS`), for it names no schema."""
+CONVERSION_KEYS = ("description", "seconds", "files")
+"""The keys every conversion's ``report.json`` holds (a JSON object naming no ``schema``)."""
+
 RUN_KINDS = {"dv2s-mine": ("settings.json", "a mining run"), "dv2s-regress-run": ("run.json", "a regression run"),
-             "dv2s-train-run": ("run.json", "a training run"), "dv2s-loop-state": ("loop.json", "a loop")}
-"""Every kind of run folder, by the schema of its record: ``{schema: (the record's file, what the folder holds)}``.
-All of them write ``report.json``/``.md``/``.html`` at the top of their folder, so no two share one."""
+             "dv2s-train-run": ("run.json", "a training run"), "dv2s-loop-state": ("loop.json", "a loop"),
+             CONVERSION_KIND: ("report.json", "a D-V2S conversion")}
+"""Every kind of run folder, by the schema of its record: ``{schema: (the record's file, what the folder holds)}``;
+the conversion's record names no schema and is known by its keys (:data:`CONVERSION_KEYS`). All of them write
+``report.json`` at the top of their folder (the runs ``report.md``/``.html`` too), so no two share one."""
+
+
+def _holds(record: Any, kind: str) -> bool:
+    """Whether ``record`` (a run folder's file, read) is the record of a run of ``kind``."""
+    if not isinstance(record, Mapping):
+        return False
+    if kind == CONVERSION_KIND and "schema" not in record:
+        return all(key in record for key in CONVERSION_KEYS) and isinstance(record["description"], Mapping)
+    return record.get("schema") == kind
 
 
 def check_run_kind(folder: Any, schema: str, *, error: Type[Exception]) -> None:
@@ -153,7 +171,7 @@ def check_run_kind(folder: Any, schema: str, *, error: Type[Exception]) -> None:
             record = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             continue  # not a record of that kind: its own check, if any, says what is wrong
-        if isinstance(record, Mapping) and record.get("schema") == other:
+        if _holds(record, other):
             raise error(f"{folder} holds {what} (its {file}), not {own}: pass another --out (a run writes its "
                         "reports at the top of its folder, over the other run's)")
 

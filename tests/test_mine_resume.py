@@ -53,6 +53,43 @@ def test_a_tag_selection_resumes_over_the_scenarios_it_chose_though_the_bank_gre
 
 
 @pytest.mark.slow
+def test_a_selection_is_recorded_once_and_resumes_by_its_terms_in_any_order(tmp_path):
+    """The run's selection is the one it began with: a resume spelling it otherwise (a name its tag already chose)
+    does not rewrite it, so the run's own command resumes after the bank grew, as does the same terms reordered or
+    repeated; a spelling that now chooses another scenario is refused."""
+    import json
+    import shutil
+
+    from scenario_bank.bank import BANK_DIR
+
+    bank = tmp_path / "bank"
+    bank.mkdir()
+    for name in ("highway_lead_vehicle_stopped", "highway_lead_vehicle_brakes"):
+        shutil.copytree(BANK_DIR / name, bank / name)
+    selection = ("tag:lead_vehicle_stopped", "highway_lead_vehicle_brakes")
+    respelt = ("tag:lead_vehicle_stopped", "highway_lead_vehicle_stopped", "highway_lead_vehicle_brakes")
+    settings = MineSettings(budget=1, scenarios=selection, bank_dir=str(bank), convert=False)
+    out = tmp_path / "run"
+
+    def recorded_selection():
+        return json.loads((out / "settings.json").read_text())["selection"]
+
+    mine("rule", settings, out=out, progress=False, reports=False)
+    mine("rule", settings.replace(budget=2, scenarios=respelt), out=out, progress=False, reports=False)
+    assert recorded_selection() == list(selection)
+    shutil.copytree(BANK_DIR / "urban_lead_vehicle_stopped", bank / "urban_lead_vehicle_stopped")
+    mine("rule", settings.replace(budget=3), out=out, progress=False, reports=False)
+    reordered = ("highway_lead_vehicle_brakes", "tag:lead_vehicle_stopped", "highway_lead_vehicle_brakes")
+    run = mine("rule", settings.replace(budget=4, scenarios=reordered), out=out, progress=False, reports=False)
+    assert {r.scenario for r in run.records} <= {"highway_lead_vehicle_stopped", "highway_lead_vehicle_brakes"}
+    assert len(run.records) == 4 and recorded_selection() == list(selection)
+    assert json.loads((out / "settings.json").read_text())["scenarios"] == ["highway_lead_vehicle_stopped",
+                                                                            "highway_lead_vehicle_brakes"]
+    with pytest.raises(RunIdentityError, match=r"scenarios: the run has 2, asked adds \['urban_lead_vehicle_stopped'\]"):
+        mine("rule", settings.replace(budget=5, scenarios=respelt), out=out, progress=False, reports=False)
+
+
+@pytest.mark.slow
 def test_a_resume_over_a_scenario_the_bank_no_longer_holds_says_so(tmp_path):
     """The recorded scenarios come from the run, not the command line: the refusal names the run and the bank."""
     import shutil

@@ -283,13 +283,19 @@ def _recorded(policy: str, settings: MineSettings, scenarios: Sequence[str],
 
 
 SELECTION = "selection"
-"""The ``settings.json`` key of the scenario selection as asked (``["tag:mined"]``; ``None`` for the whole bank):
-a resume asking the same selection mines the scenarios it resolved to when the run began, though the bank has
-grown since (by this run's own conversions, say)."""
+"""The ``settings.json`` key of the scenario selection as asked when the run began (``["tag:mined"]``; ``None`` for
+the whole bank; a resume never rewrites it): a resume asking the same terms, in any order, mines the scenarios
+they resolved to when the run began, though the bank has grown since (by this run's own conversions, say)."""
 
 
 def _selection(settings: MineSettings) -> Optional[List[str]]:
     return list(settings.scenarios) if settings.scenarios is not None else None
+
+
+def _same_terms(asked: Sequence[str], recorded: Optional[Sequence[str]]) -> bool:
+    """Whether the ``asked`` selection names the bank names and tags of the ``recorded`` one, whatever their order
+    or repetition (a recorded whole bank, ``None``, is no selection of terms)."""
+    return recorded is not None and set(asked) == set(recorded)
 
 
 @dataclass(frozen=True)
@@ -647,7 +653,8 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
 
 def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[RunOrigin]) -> _Mining:
     """The run in ``out`` (``settings.bank_dir`` resolved): a new run's settings, or a resumed run's checked against
-    the ones asked (its own scenarios and batch when none are asked); ``settings.json`` written (back)."""
+    the ones asked (its own scenarios and batch when none are asked, or the same terms in any order); ``settings.json``
+    written (back, with the selection the run began with)."""
     saved = _read_settings(out)
     batch = settings.batch or (saved.batch if saved else DEFAULT_BATCH)  # never the workers: the seed decides the run
     settings = settings.replace(batch=int(batch))
@@ -663,13 +670,13 @@ def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[R
                                    error=MiningError, key=REFERENCE_FINGERPRINT, role="reference driver")
         check_code_unchanged(saved.values, run=f"{out} holds a mining run", error=MiningError)
     same_selection = saved is not None and (settings.scenarios is None
-                                            or _selection(settings) == saved.values.get(SELECTION))
+                                            or _same_terms(settings.scenarios, saved.values.get(SELECTION)))
     names = saved.scenarios if same_selection else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
     space = space_module.SceneSpace(names or asked, settings.bank_dir)
     recorded = _recorded(policy, settings, space.scenarios, space.describe())
-    if saved is not None and settings.scenarios is None:
-        recorded[SELECTION] = saved.values.get(SELECTION)  # resumed without naming its scenarios: still the same run
+    if saved is not None:
+        recorded[SELECTION] = saved.values.get(SELECTION)  # recorded once, when the run began: a resume keeps it
     if saved is not None:
         _check_resume(saved.values, as_read(recorded, out), out)
         check_bank_unchanged(saved.values.get(BANK_IDENTITY), recorded[BANK_IDENTITY],

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 import datetime
 
+from dv2s_gym.pipeline.errors import ConversionFolderError
 from dv2s_gym.pipeline.llm_config import LLMConfig, LLMConfigLike
 from dv2s_gym.pipeline.sg.openai import classify_failure
 from scenario_bank.atomic import atomic_write_text, staged_folder
@@ -32,10 +33,11 @@ from dv2s_gym.pipeline.labels import label_path_for, read_label
 from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
 from scenario_bank.bank import Bank, Provenance, Sidecar
 from scenario_bank.elements import Elements
+from scenario_bank.run_identity import CONVERSION_KIND, check_run_kind
 
 __all__ = ["ConversionReport", "ConvertSettings", "ScenarioCheck", "UNPLACED_WARNING", "add_converted",
            "check_scenario", "checks_passed", "classify_failure", "generated", "placed_nothing", "conversion_provenance", "convert_video",
-           "generate_to_folder", "label_for"]
+           "generate_to_folder", "label_for", "check_conversion_folder"]
 
 
 @dataclass
@@ -225,6 +227,18 @@ def _write(folder: Path, name: str, text: str) -> None:
     atomic_write_text(folder / name, text, fsync=False)
 
 
+def check_conversion_folder(out: str | os.PathLike) -> None:
+    """Refuse ``out`` as a conversion's folder when it holds a run of another kind (a mining, regression or training
+    run, a loop: :data:`~scenario_bank.run_identity.RUN_KINDS`), whose ``report.json`` the conversion would write
+    over; a folder an earlier conversion wrote is written over as always.
+
+    Raises:
+        ConversionFolderError: ``"<out> holds a regression run (its run.json), not a D-V2S conversion: pass another
+            --out ..."``.
+    """
+    check_run_kind(Path(out), CONVERSION_KIND, error=ConversionFolderError)
+
+
 def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
                        llm_config: LLMConfigLike = None, labels: Optional[Elements] = None,
                        seconds: float = 10.0, started: Optional[float] = None) -> ConversionReport:
@@ -234,7 +248,11 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
 
     The files are written beside ``out`` and moved into it together at the end (:func:`staged_folder`): a run that
     fails to write (a full disk) leaves ``out`` as it was, and a finished run leaves no file of an earlier one.
+
+    Raises:
+        ConversionFolderError: ``out`` holds a run of another kind (:func:`check_conversion_folder`).
     """
+    check_conversion_folder(out)
     with staged_folder(out, OUTPUT_FILES) as stage:
         _write(stage, "description.txt", description.text.strip() + "\n")
         _write(stage, "elements.json", json.dumps(description.elements.to_dict(), indent=2) + "\n")
@@ -320,8 +338,10 @@ class ConvertSettings:
 def convert_video(video: str | os.PathLike, out: str | os.PathLike,
                   settings: Optional[ConvertSettings] = None) -> ConversionReport:
     """The whole pipeline for one video (with ``settings``, default :class:`ConvertSettings`); returns the report
-    written to ``out/report.json``."""
+    written to ``out/report.json``. ``out`` holding a run of another kind is refused before the video is read
+    (:func:`check_conversion_folder`)."""
     start = time.perf_counter()
+    check_conversion_folder(out)
     video, s = Path(video), settings or ConvertSettings()
     description = describe(video, backend=s.dra, camera=s.camera, question=s.question, llm_config=s.llm_config)
     report = generate_to_folder(description, Path(out), sg=s.sg, seed=s.seed, llm_config=s.llm_config,

@@ -15,7 +15,8 @@ Hierarchy::
     ├── UnknownBackendError              a stage asked for a backend no one registered (also a ValueError)
     ├── BackendResultError               a registered backend returned something of the wrong shape
     ├── GenerationFailedError            no generated script passed the checks (has .result)
-    └── GenerationError                  the rules SG cannot place the ego or the main event (also a DV2SError)
+    ├── GenerationError                  the rules SG cannot place the ego or the main event (also a DV2SError)
+    └── ConversionFolderError            the output folder holds a run of another kind (also a ValueError)
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ __all__ = [
     "GenerationFailedError",
     "GenerationError",
     "FrameEncodeError",
+    "ConversionFolderError",
 ]
 
 
@@ -115,3 +117,9 @@ class FrameEncodeError(PipelineError, RuntimeError):
 class GenerationError(PipelineError, ValueError):
     """The rules SG cannot place the ego or the main event of a description (the message names the phrase
     and what to write instead)."""
+
+
+class ConversionFolderError(PipelineError, ValueError):
+    """The output folder of a conversion holds a run of another kind (a mining, regression or training run, a
+    loop), whose ``report.json`` the conversion would write over; the message names the folder, what it holds and
+    the fix (another ``--out``)."""
