@@ -14,6 +14,7 @@ from dv2s_gym.pipeline.batch_convert import videos_to_convert
 from dv2s_gym.pipeline.convert import (ConversionReport, ConvertSettings, ScenarioCheck, add_converted, checks_passed,
                                        conversion_provenance, convert_video)
 from dv2s_gym.pipeline.stages import Description, Generation
+from scenario_bank.elements import Elements
 import scenario_bank.atomic as atomic
 from scenario_bank.bank import Bank
 
@@ -39,7 +40,7 @@ def test_a_folder_without_videos_is_refused_naming_the_suffixes(tmp_path):
 
 
 def test_conversion_provenance_reads_the_same_from_the_stages_and_from_their_report():
-    description = Description("A car cuts in.", {"participants": ["car", "ego"]}, backend="openai", model="vlm-1",
+    description = Description("A car cuts in.", Elements(participants=("car", "ego")), backend="openai", model="vlm-1",
                               prompt_hash="p123")
     with_model = Generation("param map = 1", backend="openai", model="llm-2", context_hash="c456")
     without = Generation("param map = 1", backend="rules")
@@ -56,7 +57,7 @@ def test_conversion_provenance_reads_the_same_from_the_stages_and_from_their_rep
 
 
 def test_a_conversion_whose_checks_failed_is_not_added_and_the_bank_is_not_touched(tmp_path):
-    report = ConversionReport(description=Description("x", {}, backend="bev"),
+    report = ConversionReport(description=Description("x", Elements(), backend="bev"),
                               generation=Generation("param map = 1", backend="rules"), check=ScenarioCheck(safe=True))
     note = add_converted(tmp_path / "bank", "clip.webm", tmp_path / "out", report, seed=0, dra="bev", sg="rules")
     assert note == "(not added: clip.webm failed validation)"
