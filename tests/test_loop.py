@@ -314,7 +314,7 @@ def test_paired_summary_counts_and_drop():
 
     before = records([True] * 8 + [False] * 2)
     after = records([True, False, False, False, True, False, False, False, True, False])
-    summary = paired_summary(before, after)
+    summary = paired_summary(held(before), held(after))
     assert summary.to_dict()["before"]["k"] == 8 and summary.to_dict()["after"]["k"] == 3
     assert summary.to_dict()["relative_drop"] == pytest.approx(5 / 8)
     assert summary.to_dict()["table"] == {"both_fail": 2, "after_only": 1, "before_only": 6, "neither": 1}
@@ -360,7 +360,7 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     lines = (out / "round_1" / "heldout.jsonl").read_text().splitlines()
     # only "after" and "control" ran
     assert lines[:len(lines_before)] == lines_before and len(lines) == len(lines_before) + 2 * kept
-    record = report.rounds[0]
+    record = report.rounds[0].to_dict()
     steps = record["steps"]
     assert set(steps) == {"mine", "split", "reference", "before", "fine_tune", "control", "after", "regress"}
     assert steps["control"]["mined_upweighted"] == 0 and steps["control"]["mined_left_out"] == 2

@@ -91,7 +91,7 @@ def test_dagger_moves_the_policy_toward_the_reference_and_saves_a_loadable_check
     policy = load_policy(f"ppo:{path}")
     assert type(policy.model).__name__ == "PPO"
     card = read_card(path)
-    tuned = card.fine_tune
+    tuned = card.fine_tune.to_dict()
     assert tuned["method"] == "dagger" and tuned["reference"] == "rule" and tuned["steps"] == 3600
     assert [h["beta"] for h in tuned["history"]] == [1.0, 0.5, 0.25]
     assert sum(h["steps"] for h in tuned["history"]) == tuned["agreement"]["states"] == 3600

@@ -18,6 +18,7 @@ from mining_helpers import mine_killed_after
 from dv2s_gym.mining.sampling.window import WindowSchedule
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.pool import LocalBackend, _ScenarioQueue
+from dv2s_gym.workers.tasks import result_object
 
 BRAKES = "highway_lead_vehicle_brakes"
 LEFT_TURN = "urban_left_turn_oncoming"
@@ -73,7 +74,7 @@ def test_the_local_pool_runs_tasks_added_while_it_runs_with_retries(tmp_path):
     with LocalBackend(workers=2, timeout=60) as pool:
         assert pool.streams
         pool.run([{**base, "seed": 10}], results.append, more=more)
-        by_seed = {r["seed"]: r for r in results}
+        by_seed = {r["seed"]: r for r in map(result_object, results)}
         assert sorted(by_seed) == [10, 11, 12, 13, 14] and len(results) == 5
         assert "crashed" in by_seed[13]["error"] and "2 attempts" in by_seed[13]["error"]  # retried, then reported
         assert not any(by_seed[s].get("error") for s in (10, 11, 12, 14))
@@ -81,7 +82,7 @@ def test_the_local_pool_runs_tasks_added_while_it_runs_with_retries(tmp_path):
         assert calls[0] == 1 and calls == sorted(calls)  # called after results were handed over
         later = []
         pool.run([{**base, "seed": 20}], later.append)  # without more: as before
-        assert [r["seed"] for r in later] == [20]
+        assert [result_object(r)["seed"] for r in later] == [20]
 
 
 def test_the_scenario_queue_takes_appended_tasks_and_prefers_the_oldest_compiled_one():

@@ -79,7 +79,7 @@ def test_a_trace_that_cannot_be_written_stops_the_run_and_the_resumed_run_counts
     with pytest.raises(MiningError) as stopped:
         mine(POLICY, out=out, **RUN)
     message = str(stopped.value)
-    first = whole.failures[0]["index"]
+    first = whole.failures[0].index
     assert calls[0].endswith(f"{first:06d}.json.gz") and calls[0] in message
     assert "the disk is full" in message and "free space on /" in message
     assert "rerun the same command to resume" in message

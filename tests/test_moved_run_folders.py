@@ -92,7 +92,7 @@ def test_a_moved_regression_run_resumes_where_it_is(tmp_path):
     again = run_regression(f"ppo:{moved}/policy/model.zip", "rule", out_dir=moved, bank_dir=str(moved / "bank"),
                            **run)
     assert (moved / "results.jsonl").read_text().splitlines()[0] == results[0]
-    assert again["verdict"] == first["verdict"] and again["overall"] == first["overall"]
+    assert again.verdict == first.verdict and again.overall.to_dict() == first.overall.to_dict()
 
 
 def test_a_moved_training_run_resumes_where_it_is(tmp_path):
