@@ -19,6 +19,7 @@ import pytest
 
 from scenario_bank.elements import ElementError, Elements, element_set, empty_elements
 from scenario_bank.records import Sidecar
+from tests.test_mining_typed_records import _key_reads
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("scenario_bank", "envs", "policies", "dv2s_gym")
@@ -127,16 +128,8 @@ def keyed_element_reads(source: str) -> List[str]:
     """The string-key reads (``x["actions"]``, ``x.get("road")``) of an element field on a value whose name holds
     elements (``elements``, ``description.elements``, ``simulated_elements``...)."""
     found = []
-    for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Subscript) and isinstance(node.ctx, ast.Load):
-            target, key = node.value, node.slice
-        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get" \
-                and node.args:
-            target, key = node.func.value, node.args[0]
-        else:
-            continue
-        name = ast.unparse(target).split(".")[-1].rstrip("()")
-        if "elements" in name and isinstance(key, ast.Constant) and key.value in FIELDS:
+    for node, target, key in _key_reads(ast.parse(source)):
+        if "elements" in ast.unparse(target).split(".")[-1].rstrip("()") and key in FIELDS:
             found.append(ast.unparse(node))
     return found
 

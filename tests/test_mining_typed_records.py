@@ -277,19 +277,8 @@ _KEYED = ("settings", "recorded", "task", "origin")
 def keyed_reads(source: str) -> List[str]:
     """The string-key reads (``x["key"]``, ``x.get("key")``) of a value named like :data:`_KEYED` in ``source`` (a
     write, ``x["key"] = ...``, fills a file's JSON object: not a read)."""
-    found = []
-    for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Subscript) and isinstance(node.ctx, ast.Load):
-            target, key = node.value, node.slice
-        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get" \
-                and node.args:
-            target, key = node.func.value, node.args[0]
-        else:
-            continue
-        name = ast.unparse(target).split(".")[-1]
-        if name in _KEYED and isinstance(key, ast.Constant) and isinstance(key.value, str):
-            found.append(ast.unparse(node))
-    return found
+    return [ast.unparse(node) for node, target, _ in _key_reads(ast.parse(source))
+            if ast.unparse(target).split(".")[-1] in _KEYED]
 
 
 def test_the_keyed_read_check_sees_settings_and_tasks_read_by_key():
