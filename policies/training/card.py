@@ -13,6 +13,7 @@ from policies.card_record import ModelCard
 from policies.evaluation import EVAL_SEED_BASE, TRAIN_SEED_LOW
 from policies.model_card import bank_version, evaluate_for_card, write_card
 from policies.training.config import TRAIN_SEED_HIGH, TrainConfig
+from policies.training.run_record import TrainRun
 from policies.training.scenario_envs import ScenarioSampler, evaluation_episodes
 
 __all__ = ["trained_card", "with_card_evaluation"]
@@ -35,10 +36,10 @@ def _card_record(card: Mapping[str, Any]) -> ModelCard:
 
 
 def trained_card(config: TrainConfig, names: Sequence[str], env_config: Dict[str, Any], model: Any,
-          sampler: ScenarioSampler, record: Mapping[str, Any]) -> ModelCard:
-    """The trained model's card, without its evaluation."""
-    wall = sum(s["wall_time_s"] for s in record["segments"])
-    trained = sum(s["end_step"] - s["start_step"] for s in record["segments"])
+          sampler: ScenarioSampler, record: TrainRun) -> ModelCard:
+    """The trained model's card, without its evaluation; ``record``: the run's ``run.json`` with its segments."""
+    wall = sum(segment.wall_time_s for segment in record.segments)
+    trained = sum(segment.steps for segment in record.segments)
     return _card_record({
         "name": Path(config.out).name,
         "algorithm": config.algo,
@@ -58,7 +59,7 @@ def trained_card(config: TrainConfig, names: Sequence[str], env_config: Dict[str
             "seed": config.seed,
             "wall_time_s": round(wall, 1),
             "steps_per_s": round(trained / wall, 1) if wall > 0 else 0.0,
-            "segments": record["segments"],
+            "segments": [segment.to_dict() for segment in record.segments],
             "train_seed_range": [TRAIN_SEED_LOW, TRAIN_SEED_HIGH],
         },
         "versions": _versions(),

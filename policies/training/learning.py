@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Mapping, Optional, Sequence, Tuple
 
 import stable_baselines3 as sb3
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
@@ -17,7 +17,8 @@ from policies.registry import load_policy
 from policies.training.callbacks import CheckpointSaver, CurriculumCallback, HeldOutEvaluationCallback, ProgressCallback
 from policies.training.card import trained_card, with_card_evaluation
 from policies.training.config import FINE_TUNING_ONLY, TrainConfig, TrainingError
-from policies.training.run_record import open_run_record, resolve_scenario_names, restored_sampler, write_run_record
+from policies.training.run_record import (TrainSegment, open_run_record, resolve_scenario_names, restored_sampler,
+                                         write_run_record)
 from policies.training.scenario_envs import (ScenarioSampler, TrainEnvSpec, close_vec_env, evaluation_episodes,
                                              make_vec_env)
 from scenario_bank.atomic import atomic_path
@@ -123,11 +124,12 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         began = time.perf_counter()
         remaining = config.steps - start
 
-        def close_segment(status: str) -> Dict[str, Any]:
-            segment = {"start_step": start, "end_step": int(model.num_timesteps), "status": status,
-                       "wall_time_s": round(time.perf_counter() - began, 3),
-                       "resumed_from": checkpoint.name if resume else None}
-            record["segments"].append(segment)
+        def close_segment(status: str) -> TrainSegment:
+            nonlocal record
+            segment = TrainSegment(start_step=start, end_step=int(model.num_timesteps), status=status,
+                                   wall_time_s=round(time.perf_counter() - began, 3),
+                                   resumed_from=checkpoint.name if resume else None)
+            record = record.with_segment(segment)
             write_run_record(run_path, record)
             return segment
 
@@ -155,7 +157,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
                                 env_config, model_path, log)
     card_path = write_card(out, card)
     log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
-        f"{segment['wall_time_s']:.0f} s)")
+        f"{segment.wall_time_s:.0f} s)")
     return read_card(card_path)
 
 
