@@ -10,23 +10,26 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, Dict, List, Sequence
+from typing import Any, Dict, List, Sequence, Union
 
 from dv2s_gym.loop import run as loop_module
+from dv2s_gym.loop.record import LoopReportBody
 from dv2s_gym.mining import miner as miner_module
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
 from scenario_bank.records import HeldOutEpisode
 
 
-def written_report(body: Dict[str, Any]) -> Dict[str, Any]:
-    """A loop report's ``body`` with its recommendation, as the loop writes every ``report.json``; the settings
-    the body does not give are the defaults, as ``loop.json`` records every setting."""
+def written_report(body: Union[Dict[str, Any], LoopReportBody]) -> LoopReportBody:
+    """A loop report's ``body`` (its JSON object or record) with its recommendation, as the loop writes every
+    ``report.json``; the settings the body does not give are the defaults, as ``loop.json`` records every
+    setting."""
     from dv2s_gym.loop.settings import LoopSettings
     from dv2s_gym.loop.verdict import recommendation
 
-    body = {**body, "settings": {**LoopSettings().recorded(), **body.get("settings", {})}}
-    return {**body, "recommendation": recommendation(body).to_dict()}
+    body = body.to_dict() if isinstance(body, LoopReportBody) else body
+    report = LoopReportBody.from_dict({**body, "settings": {**LoopSettings().recorded(), **body.get("settings", {})}})
+    return report.replace(recommendation=recommendation(report).to_dict())
 
 
 def add_mined_copy(bank_dir: str, source: str, name: str, cluster: str, parent: str | None = None) -> str:

@@ -559,12 +559,13 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     assert "control arm" in markdown and "untouched scenario set" in markdown and "split by family" in markdown
     assert markdown.count("held-out family's parent") == len(split["held_out_families"])
     # the HTML shows a kept scenario's failure clip where its bank entry has one
+    from dv2s_gym.loop.record import LoopReportBody
     from dv2s_gym.loop.report import write_loop_reports
 
     assert "<video" not in report.paths["html"].read_text()
     held = split["held_out"][0]
     (tmp_path / "loop" / "bank" / held / "failure.webm").write_bytes(b"clip")
-    page = write_loop_reports(report.to_json(), tmp_path / "loop")["html"].read_text()
+    page = write_loop_reports(LoopReportBody.from_dict(report.to_json()), tmp_path / "loop")["html"].read_text()
     assert f'<video src="bank/{held}/failure.webm"' in page and f"{held} (held out)" in page
     assert page.count("<svg") == 2 and "held-out failure rate (95 % Wilson)" in page and "http" not in page
 
@@ -1055,7 +1056,7 @@ def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, 
     _regression_verdicts(monkeypatch, {"round_1": "FAIL", "round_2": "PASS", "round_3": "INCONCLUSIVE"})
 
     def over_rounds(report, out=None, folder=None):  # the stand-in regression test writes no report to pair
-        tested = [r for r in map(RoundRecord.from_dict, report.get("rounds", [])) if r.steps.regress is not None]
+        tested = [r for r in report.round_records if r.steps.regress is not None]
         return None if len(tested) < 2 else FinalVsStart(rounds=(1, tested[-1].round), verdict="PASS", reason="ok",
                                                          null_fields=frozenset())
 
@@ -1099,7 +1100,7 @@ def test_the_next_round_follows_the_policy_to_use_when_the_rounds_are_judged_aga
     judged = []
 
     def over_rounds(report, out=None, folder=None):
-        tested = [r for r in map(RoundRecord.from_dict, report.get("rounds", [])) if r.steps.regress is not None]
+        tested = [r for r in report.round_records if r.steps.regress is not None]
         if len(tested) < 2:
             return None
         judged.append(len(tested))

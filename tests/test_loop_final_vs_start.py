@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dv2s_gym.loop.record import RecordedLoopSettings, RoundRecord
+from dv2s_gym.loop.record import LoopReportBody, RecordedLoopSettings, RoundRecord
 from dv2s_gym.loop.report import final_vs_start, write_loop_reports
 from dv2s_gym.loop.settings import LoopSettings
 from dv2s_gym.regress.report import build_report, write_json
@@ -42,14 +42,14 @@ P1_FAILS = {("scenario_a", 0), ("scenario_b", 1)}
 P2_FAILS = {(n, s) for n in NAMES for s in SEEDS} - {("scenario_b", 3)}
 
 
-def _loop(tmp_path: Path, rounds: int, hashes2=None) -> dict:
+def _loop(tmp_path: Path, rounds: int, hashes2=None) -> LoopReportBody:
     records = [{"round": 1, "policy": "p0", "new_policy": "p1", "steps": {"regress": {
         "verdict": "PASS", "report": _regress(tmp_path / "r1.json", "p1", "p0", P1_FAILS, P0_FAILS)}}}]
     if rounds > 1:
         records.append({"round": 2, "policy": "p1", "new_policy": "p2", "steps": {"regress": {
             "verdict": "FAIL", "report": _regress(tmp_path / "r2.json", "p2", "p1", P2_FAILS, P1_FAILS, hashes2)}}})
-    return {"schema": "dv2s-loop", "schema_version": 1, "settings": LOOP_SETTINGS, "policy": records[-1]["new_policy"],
-            "rounds": records}
+    return LoopReportBody.from_dict({"schema": "dv2s-loop", "schema_version": 1, "settings": LOOP_SETTINGS,
+                                     "policy": records[-1]["new_policy"], "rounds": records})
 
 
 def test_final_policy_is_paired_with_the_starting_policy(tmp_path):
@@ -85,7 +85,7 @@ def test_a_changed_starting_bank_is_not_compared(tmp_path):
     final = final_vs_start(_loop(tmp_path, 2, hashes2=changed))
     assert "scenario_b" in final.to_dict()["error"] and "no paired comparison" in final.to_dict()["error"]
     missing = _loop(tmp_path, 2)
-    Path(missing["rounds"][0]["steps"]["regress"]["report"]).unlink()
+    Path(missing.rounds[0].steps.regress.report).unlink()
     assert final_vs_start(missing).error.startswith("cannot read the rounds' regression reports")
 
 
@@ -120,7 +120,7 @@ def test_the_next_round_and_the_report_never_use_a_policy_the_cross_round_check_
     from dv2s_gym.loop import run as loop_module
 
     body = _loop(tmp_path, 2)
-    rounds = [_accepted(record) for record in body["rounds"]]  # round 2 passes against P1 but P2 FAILs against P0
+    rounds = [_accepted(record.to_dict()) for record in body.rounds]  # round 2 passes against P1 but P2 FAILs against P0
     loop = SimpleNamespace(state=_state(rounds), out=tmp_path)
     assert loop_module._next_start(loop, 2, "p1") == "p0"
     # round 3 starts from p0 and its own regression test FAILs
@@ -130,7 +130,8 @@ def test_the_next_round_and_the_report_never_use_a_policy_the_cross_round_check_
     loop = SimpleNamespace(state=_state(rounds), out=tmp_path)
     assert loop_module._next_start(loop, 3, "p0") == "p0"
     rounds = [record.to_dict() for record in loop.state.rounds]
-    paths = write_loop_reports({**body, "policy": "p3", "rounds": rounds}, tmp_path / "loop")
+    paths = write_loop_reports(LoopReportBody.from_dict({**body.to_dict(), "policy": "p3", "rounds": rounds}),
+                               tmp_path / "loop")
     data = json.loads(paths["json"].read_text())
     assert data["rounds"][1]["final_vs_start"]["verdict"] == "FAIL"
     assert data["recommendation"]["policy"] == "p0" and "Policy to use: `p0`" in paths["md"].read_text()
@@ -150,7 +151,7 @@ def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_direct
         _regress(stored, f"p{number}", policy, fails, base_fails)
         rounds.append(_accepted({"round": number, "policy": policy, "new_policy": f"p{number}",
                                  "steps": {"regress": {"report": str(stored)}}}))
-    body = {"settings": LOOP_SETTINGS, "policy": "p2", "rounds": rounds}
+    body = LoopReportBody.from_dict({"settings": LOOP_SETTINGS, "policy": "p2", "rounds": rounds})
     (tmp_path / "out").rename(tmp_path / "moved")  # the loop folder moved after the run
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
@@ -163,7 +164,7 @@ def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_direct
     # a cross-round check that cannot run (here: no loop folder to read the reports from) never accepts
     unread = final_vs_start(body)
     assert "cannot read" in unread.error
-    verdict = recommendation({**body, "final_vs_start": unread})
+    verdict = recommendation(body.replace(final_vs_start=unread))
     assert verdict.verdict == "NOT ACCEPTED" and verdict.exit_code == 3 and verdict.policy == "p1"
     assert "could not run" in verdict.reason
 
@@ -191,7 +192,8 @@ def test_a_round_begun_from_another_policy_than_the_rounds_before_it_recommend_i
 
 def test_a_rounds_cross_round_check_is_a_field_written_as_read_null_included(tmp_path):
     body = _loop(tmp_path, 2)
-    paths = write_loop_reports({**body, "rounds": [_accepted(record) for record in body["rounds"]]}, tmp_path / "loop")
+    paths = write_loop_reports(body.replace(rounds=tuple(RoundRecord.from_dict(_accepted(record.to_dict()))
+                                                         for record in body.rounds)), tmp_path / "loop")
     written = json.loads(paths["json"].read_text())["rounds"]
     # round 1: fewer than two tested rounds up to it, so no check could be made (null); round 2: FAIL against P0
     assert "final_vs_start" in written[0] and written[0]["final_vs_start"] is None

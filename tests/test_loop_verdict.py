@@ -6,6 +6,7 @@ import json
 
 import pytest
 
+from dv2s_gym.loop.record import LoopReportBody
 from dv2s_gym.loop.verdict import FAMILY_RULE, heldout_worse, recommendation
 from loop_helpers import held, written_report
 
@@ -29,9 +30,10 @@ def _round(number, verdict, *, control_only=0, fine_tuned_only=0, p=1.0):
                                                                                                         "control")}}}}
 
 
-def _report(*rounds, **extra):
-    return {"settings": {"policy": "dv2s-ppo"}, "policy": rounds[-1].get("new_policy", "dv2s-ppo"),
-            "rounds": list(rounds), **extra}
+def _report(*rounds, **extra) -> LoopReportBody:
+    policy = rounds[-1].get("new_policy", "dv2s-ppo")
+    return LoopReportBody.from_dict({"settings": {"policy": "dv2s-ppo"}, "policy": policy, "rounds": list(rounds),
+                                     **extra})
 
 
 def test_the_last_accepted_policy_is_recommended_and_a_later_regression_is_not():
@@ -221,7 +223,7 @@ def test_the_recommendation_is_a_record_written_as_a_json_object_and_every_repor
     assert list(data) == ["policy", "verdict", "round", "candidate", "reason", "decided_by", "exit_code", "too_small",
                           "sentence"]
     assert Recommendation.from_dict(data) == verdict and data["too_small"] is None and data["round"] == 2
-    assert list(recommendation({"rounds": []}).to_dict()) == list(data)  # no round fine-tuned: the same fields
+    assert list(recommendation(LoopReportBody(rounds=())).to_dict()) == list(data)  # no round fine-tuned: the same fields
     with pytest.raises(LoopError, match=r"the loop report \(report.json\) holds no recommendation; .*rerun the loop"):
         render_markdown(body)  # no fallback: the loop writes the recommendation into every report
     with pytest.raises(LoopError, match="recommendation has no sentence"):
@@ -599,9 +601,9 @@ def test_the_cross_round_check_changes_only_an_accepted_verdict():
 def test_the_candidate_is_the_rounds_own_policy_and_only_a_not_accepted_round_is_too_small():
     unnamed = _round(1, "PASS")
     del unnamed["new_policy"]
-    verdict = recommendation({**_report(unnamed), "policy": "ppo:loop/policy.zip"})
+    verdict = recommendation(_report(unnamed).replace(policy="ppo:loop/policy.zip"))
     assert verdict.verdict == "ACCEPTED" and verdict.policy == verdict.candidate == "ppo:loop/policy.zip"
-    named = recommendation({**_report(_round(1, "FAIL")), "policy": "ppo:elsewhere.zip"})
+    named = recommendation(_report(_round(1, "FAIL")).replace(policy="ppo:elsewhere.zip"))
     assert named.candidate == "ppo:round_1/policy/model.zip"
     rejected = _round(1, "FAIL")
     rejected["steps"]["after"]["underpowered"] = "only 5 held-out episode(s)"

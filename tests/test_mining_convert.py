@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import dv2s_gym.mining.conversion.convert as convert_module
+from dv2s_gym.loop.record import LoopReportBody
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.conversion.episodes import reproduction_seeds, same_failure_class
 from dv2s_gym.mining.conversion.ranges import exact_number
@@ -221,10 +222,11 @@ def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_pat
 
     conversion, out = out, out.to_dict()  # the record for the product, its JSON object for the checks
     seed = out["reproduction"]["clip"]["seed"]
-    loop = {"settings": {"bank_dir": str(tmp_path / "bank"), "policy": "keep_lane"}, "policy": "keep_lane",
-            "rounds": [{"round": 1, "steps": {"mine": {"folder": str(tmp_path / "run"), "kept": [
-                {"cluster": out["cluster"], "scenario": out["bank_entry"]},
-                {"cluster": out["cluster"], "scenario": out["replay_entry"], "replay": True}]}}}]}
+    loop = LoopReportBody.from_dict({
+        "settings": {"bank_dir": str(tmp_path / "bank"), "policy": "keep_lane"}, "policy": "keep_lane",
+        "rounds": [{"round": 1, "steps": {"mine": {"folder": str(tmp_path / "run"), "kept": [
+            {"cluster": out["cluster"], "scenario": out["bank_entry"]},
+            {"cluster": out["cluster"], "scenario": out["replay_entry"], "replay": True}]}}}]})
     clips = round_clips(loop, tmp_path)[1]
     converted = clips[f"{out['bank_entry']} (fine-tuned on)"]
     assert [c["path"] for c in converted] == [f"bank/{out['bank_entry']}/failure.webm",

@@ -10,7 +10,7 @@ from pathlib import Path
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.html import _cards, _Videos
 from dv2s_gym.mining.report_record import ClusterEntry
-from dv2s_gym.loop.record import ErroredEpisodes, MiningSummary, RoundRecord
+from dv2s_gym.loop.record import ErroredEpisodes, LoopReportBody, MiningSummary, RoundRecord
 from dv2s_gym.loop.report import _entry_clips
 from loop_helpers import written_report
 
@@ -140,8 +140,9 @@ def test_every_kept_entry_of_the_loop_report_shows_its_clip_or_why_it_has_none(t
         "kind": "mined", "replay": {"seed": 2}, "cluster": "t/stall/0", "video": None}}))
     kept = [{"scenario": rejected.name, "cluster": "s/collision/0", "replay": True},
             {"scenario": extra.name, "cluster": "t/stall/0", "replay": True}]
-    report = {"settings": {"bank_dir": str(bank)}, "policy": "p",
-              "rounds": [{"round": 1, "steps": {"mine": {"kept": kept}, "split": {"held_out": [extra.name]}}}]}
+    report = LoopReportBody.from_dict({
+        "settings": {"bank_dir": str(bank), "policy": "p"}, "policy": "p",
+        "rounds": [{"round": 1, "steps": {"mine": {"kept": kept}, "split": {"held_out": [extra.name]}}}]})
     clips = round_clips(report, tmp_path)[1]
     assert len(clips) == 2
     (video,) = clips[f"{rejected.name} (fine-tuned on)"]

@@ -49,14 +49,6 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "mining.sampling.rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
     "loop.run.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
     "loop.run.untouched_settings": "takes the policy's env config, a JSON object of its model card",
-    "loop.verdict.recommendation": "takes the body of report.json (and returns its typed Recommendation)",
-    "loop.report.final_vs_start": "takes the body of report.json (and returns its typed FinalVsStart)",
-    "loop.report.with_cross_round_checks": "takes and returns the body of report.json",
-    "loop.report_text.report_rounds": "reads the rounds of the body of report.json as records",
-    "loop.report_text.render_markdown": "renders the body of report.json",
-    "loop.html.render_html": "renders the body of report.json",
-    "loop.report.round_clips": "takes the body of report.json",
-    "loop.report.write_loop_reports": "writes the body of report.json and its renderings",
 }
 """``"module.function"`` of the typed modules that take or return a JSON object, each with the reason. A record's
 ``to_dict`` (its JSON form) needs no entry."""

@@ -7,9 +7,9 @@ import re
 from html import escape
 from typing import Any, List, Mapping, Optional
 
-from dv2s_gym.loop.record import HeldOutComparison, RoundRecord
-from dv2s_gym.loop.report_text import (_final_line, _floor_lines, _recommendation, _replays_text, _report_final,
-                                       _round_row, _weights, render_markdown, report_rounds)
+from dv2s_gym.loop.record import HeldOutComparison, LoopReportBody, RoundRecord
+from dv2s_gym.loop.report_text import (_final_line, _floor_lines, _recommendation, _replays_text, _round_row,
+                                       _weights, render_markdown, report_rounds)
 
 __all__ = ["render_html"]
 
@@ -141,10 +141,11 @@ def _round_figures(record: RoundRecord) -> str:
     return f'<div class="row">{"".join(charts)}</div>' if charts else ""
 
 
-def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[str, Any]]] = None) -> str:
-    """A self-contained HTML page (inline CSS, nothing fetched) of the loop report; ``clips``: round -> scenario ->
-    ``[{"path", "label"}]`` videos shown per round (:func:`round_clips`)."""
-    settings = report.get("settings", {})
+def render_html(report: LoopReportBody,
+                clips: Optional[Mapping[int, Mapping[str, List[Mapping[str, Optional[str]]]]]] = None) -> str:
+    """A self-contained HTML page (inline CSS, nothing fetched) of the loop report's body; ``clips``: round ->
+    scenario -> ``[{"path", "label"}]`` videos shown per round (:func:`round_clips`)."""
+    settings = report.settings.to_dict() if report.settings is not None else {}  # read by name
     advice = _recommendation(report)
     rounds = report_rounds(report)
     rows = []
@@ -156,7 +157,7 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
                  row["untouched"]]
         row = "".join(f"<td>{escape(str(c))}</td>" for c in cells)
         rows.append(f"<tr>{row}<td class=\"{escape(str(verdict))}\">{escape(str(verdict))}</td></tr>")
-    final_line = _final_line(_report_final(report))
+    final_line = _final_line(report.final_vs_start)
     final_html = f"<p>{escape(final_line).replace('**', '')}</p>" if final_line else ""
     head = ("<tr><th>round</th><th>failures / episodes mined</th><th>clusters</th><th>kept</th>"
             "<th>fine-tune / held-out</th><th>held-out failure rate: start</th><th>control</th><th>fine-tuned</th>"
@@ -176,8 +177,8 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
             details.append("<h3>Clips of the kept mined scenarios: each failure beside its converted script driven "
                            "by the same policy (an entry without a clip says why)</h3>" + _clips_html(round_clips))
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
-            f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
-            f"last fine-tuned policy <code>{escape(str(report.get('policy')))}</code>.</p>"
+            f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(report.start_policy))}</code>; "
+            f"last fine-tuned policy <code>{escape(str(report.policy))}</code>.</p>"
             f"<p class=\"{escape(advice.verdict.replace(' ', '_'))}\"><b>"
             f"{escape(advice.sentence)}</b></p><p>Policy to use: <code>"
             f"{escape(str(advice.policy))}</code></p><p>Mining budget {settings.get('budget')} "

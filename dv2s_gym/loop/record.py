@@ -31,7 +31,7 @@ __all__ = ["ErroredEpisodes", "LoopStart", "RecordedLoopSettings", "PairedTable"
            "FamilyHarmRow", "FamilyHarm", "HeldOutWorse", "HeldOutTests", "FinalVsStart",
            "RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
            "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
-           "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS", "recorded"]
+           "RegressComparison", "UntouchedComparison", "RegressSummary", "LoopReportBody", "STEPS", "recorded"]
 
 STEPS = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 """The steps of a round, in the order they run (a round that kept no mined scenario has ``skipped`` after
@@ -712,3 +712,43 @@ class RoundRecord(JsonRecord):
     def fine_tuned(self) -> bool:
         """Whether the round fine-tuned a policy (it has one, or its ``fine_tune`` step ran)."""
         return bool(self.new_policy) or self.steps.fine_tune is not None
+
+
+@dataclass(frozen=True, eq=False)
+class LoopReportBody(JsonRecord):
+    """The body of a loop's ``report.json`` (:mod:`dv2s_gym.loop.report`), which its Markdown and HTML forms are
+    rendered from: the format (``schema`` ``"dv2s-loop"``, ``schema_version``), the loop folder ``out``, the loop's
+    ``settings`` (:class:`RecordedLoopSettings`), the last fine-tuned ``policy``, the ``rounds`` (each a
+    :class:`RoundRecord`), the ``recommendation`` (the JSON object of
+    :class:`dv2s_gym.loop.verdict.Recommendation`) and, with two or more regression-tested rounds, the report's own
+    cross-round check (``final_vs_start``, :class:`FinalVsStart`). Every field is optional (the body of a report
+    being written may not hold them all yet); the verdict and the reports say which one they need. Other keys are
+    kept in ``extra``."""
+
+    schema: Optional[str] = None
+    schema_version: Optional[int] = None
+    out: Optional[str] = None
+    settings: Optional[RecordedLoopSettings] = None
+    policy: Optional[str] = None
+    rounds: Optional[Tuple[RoundRecord, ...]] = None
+    recommendation: Optional[Mapping[str, Any]] = None
+    final_vs_start: Optional[FinalVsStart] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _WHAT: ClassVar[str] = "loop report"
+
+    @property
+    def start_policy(self) -> Optional[str]:
+        """The policy the loop started from (its settings' ``policy``), or ``None`` without settings."""
+        return self.settings.policy if self.settings is not None else None
+
+    @property
+    def round_records(self) -> Tuple[RoundRecord, ...]:
+        """The rounds (none when the body holds none)."""
+        return self.rounds or ()
+
+    @property
+    def cross_round_checked(self) -> bool:
+        """Whether the body records its own cross-round check (``final_vs_start``, its ``null`` included)."""
+        return self.final_vs_start is not None or "final_vs_start" in (self.null_fields or ())

@@ -106,7 +106,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 
 from dv2s_gym.loop.html import render_html
-from dv2s_gym.loop.record import FinalVsStart, MinedEntry, MiningSummary, SplitRecord
+from dv2s_gym.loop.record import FinalVsStart, LoopReportBody, MinedEntry, MiningSummary, SplitRecord
 from dv2s_gym.loop.report_text import (errored_note, errored_text, rate_text, reference_gate_text, render_markdown,
                                        report_rounds, round_summary)
 from dv2s_gym.loop.verdict import ACCEPTED, judge_round, recommendation
@@ -151,7 +151,7 @@ def _regress_report_path(stored: str, folder: Optional[Path]) -> Path:
     return next((candidate for candidate in candidates if candidate.is_file()), candidates[0])
 
 
-def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
+def final_vs_start(report: LoopReportBody, out: Optional[Path] = None,
                    folder: Optional[Path] = None) -> Optional[FinalVsStart]:
     """The final policy against the starting policy on the starting bank, from the rounds' regression reports.
 
@@ -209,8 +209,8 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
                         regressed=tuple(paired.regressed or ()), report=str(path) if path is not None else None)
 
 
-def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = None,
-                            folder: Optional[Path] = None) -> Dict[str, Any]:
+def with_cross_round_checks(report: LoopReportBody, out: Optional[Path] = None,
+                            folder: Optional[Path] = None) -> LoopReportBody:
     """``report`` with the cross-round check (:func:`final_vs_start` over the rounds up to it) recorded in each
     round that its own tests accepted (``None`` before two rounds were regression-tested), and, with two or more
     tested rounds, the report's own ``final_vs_start`` (its paired report written under ``out``). A policy the
@@ -219,17 +219,17 @@ def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = Non
     for index, record in enumerate(rounds):
         judged = judge_round(record)
         if judged is not None and judged.verdict == ACCEPTED and not record.cross_round_checked:
-            checked = final_vs_start({"rounds": rounds[:index + 1]}, folder=folder or out)
+            checked = final_vs_start(LoopReportBody(rounds=tuple(rounds[:index + 1])), folder=folder or out)
             rounds[index] = record.with_cross_round_check(checked)
-    body = {**report, "rounds": [record.to_dict() for record in rounds]}
-    if "final_vs_start" not in body:
+    body = report.replace(rounds=tuple(rounds))
+    if not body.cross_round_checked:
         final = final_vs_start(body, out, folder)
         if final is not None:
-            body["final_vs_start"] = final.to_dict()
+            body = body.replace(final_vs_start=final)
     return body
 
 
-def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, List[Dict[str, str]]]]:
+def round_clips(report: LoopReportBody, out: Path) -> Dict[int, Dict[str, List[Dict[str, str]]]]:
     """Per round, each kept mined scenario's clips, as paths relative to ``out``: ``[{"path", "label", "group",
     "note"}]``, each failure's clip followed by the clip of its converted script driven by the policy (one
     reproduction episode, :data:`dv2s_gym.mining.conversion.convert.ENTRY_CONVERTED_VIDEO`), the two of one ``group`` shown
@@ -238,12 +238,12 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
     clip, its ``note`` saying why (no converted script, or the judge's rejection of the script converted from it);
     a kept entry with no clip at all gets one item with ``path`` ``None`` whose ``note`` says why (an extra exact
     replay of a cluster no conversion tried is not filmed)."""
-    settings = report.get("settings") or {}
-    bank = Path(settings.get("bank_dir") or Path(out) / "bank")
+    settings = report.settings
+    bank = Path((settings.bank_dir if settings is not None else None) or Path(out) / "bank")
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
     for record in report_rounds(report):
         mine = record.steps.mine if record.steps.mine is not None else MiningSummary()
-        policy = record.policy or report.get("policy")
+        policy = record.policy or report.policy
         split = record.steps.split if record.steps.split is not None else SplitRecord()
         held = set(split.held_out_scenarios)
         clips: Dict[str, List[Dict[str, str]]] = {}
@@ -376,8 +376,9 @@ def _entry_clips(entry: MinedEntry, folder: Path, mine: MiningSummary, policy: O
     return found
 
 
-def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
-    """Write ``report.json``, ``report.md`` (and ``report.html`` when available) atomically; returns their paths.
+def write_loop_reports(report: LoopReportBody, out: Path) -> Dict[str, Path]:
+    """Write ``report.json`` (the body ``report``), ``report.md`` (and ``report.html`` when available) atomically;
+    returns their paths.
 
     With two or more regression-tested rounds, ``final_vs_start`` (:func:`final_vs_start`) is added to them, and to
     each accepted round the same check over the rounds up to it (:func:`with_cross_round_checks`)."""
@@ -385,8 +386,8 @@ def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
 
     report = with_cross_round_checks(report, out)
-    report["recommendation"] = recommendation(report).to_dict()
-    paths = {"json": atomic_write_json(out / "report.json", dict(report), indent=1) or out / "report.json"}
+    report = report.replace(recommendation=recommendation(report).to_dict())
+    paths = {"json": atomic_write_json(out / "report.json", report.to_dict(), indent=1) or out / "report.json"}
     markdown = render_markdown(report)
     atomic_write_text(out / "report.md", markdown)
     paths["md"] = out / "report.md"

@@ -7,9 +7,9 @@ from __future__ import annotations
 from typing import Any, Dict, List, Mapping, Optional
 
 from dv2s_gym.loop.errored import merged_messages, messages_text
-from dv2s_gym.loop.record import (ControlTable, ErroredEpisodes, FinalVsStart, HeldOutComparison, MiningSummary,
-                                  PairedTable, ReferenceGate, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
-                                  UntouchedComparison, recorded)
+from dv2s_gym.loop.record import (ControlTable, ErroredEpisodes, FinalVsStart, HeldOutComparison, LoopReportBody,
+                                  MiningSummary, PairedTable, ReferenceGate, RegressSummary, RoundRecord, RoundSteps,
+                                  SplitRecord, UntouchedComparison, recorded)
 from dv2s_gym.loop.verdict import HELDOUT_ALPHA, Recommendation, evidence_floor_note
 from dv2s_gym.mining.report_text import by_type_text
 from policies.card_record import FineTuneMethod
@@ -64,12 +64,6 @@ def _final_line(final: Optional[FinalVsStart]) -> Optional[str]:
             + (f"; report `{final.report}`" if final.report else "") + ".")
 
 
-def _report_final(report: Mapping[str, Any]) -> Optional[FinalVsStart]:
-    """The report's own cross-round check (``final_vs_start``), read into its record; ``None`` without one."""
-    found = report.get("final_vs_start")
-    return None if found is None else FinalVsStart.from_dict(found)
-
-
 _ORDER = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 
 
@@ -78,9 +72,9 @@ def _seconds(timings: Mapping[str, Any]) -> str:
     return ", ".join(f"{step} {float(timings[step]):.0f} s" for step in steps) or "-"
 
 
-def report_rounds(report: Mapping[str, Any]) -> List[RoundRecord]:
-    """The rounds of a loop report's body (``report.json``'s ``rounds``), as records."""
-    return [RoundRecord.from_dict(record) for record in report.get("rounds") or []]
+def report_rounds(report: LoopReportBody) -> List[RoundRecord]:
+    """The rounds of a loop report's body (``report.json``'s ``rounds``)."""
+    return list(report.round_records)
 
 
 def _round_row(record: RoundRecord) -> Dict[str, Any]:
@@ -368,9 +362,9 @@ def _heldout_lines(after: Optional[HeldOutComparison]) -> List[str]:
     return lines
 
 
-def _recommendation(report: Mapping[str, Any]) -> Recommendation:
+def _recommendation(report: LoopReportBody) -> Recommendation:
     """The report's recommendation (every loop report has one: a body without it is a :class:`LoopError`)."""
-    return Recommendation.from_dict(report.get("recommendation"), source="the loop report (report.json)")
+    return Recommendation.from_dict(report.recommendation, source="the loop report (report.json)")
 
 
 def _floor_lines(settings: Mapping[str, Any]) -> List[str]:
@@ -380,13 +374,12 @@ def _floor_lines(settings: Mapping[str, Any]) -> List[str]:
     return [f"**WARNING: {note}.**", ""] if note else []
 
 
-def _heading_lines(report: Mapping[str, Any]) -> List[str]:
+def _heading_lines(report: LoopReportBody) -> List[str]:
     """The report's title, where the loop started and ended, and its recommendation."""
-    settings = report.get("settings", {})
     advice = _recommendation(report)
     return [
         "# dv2s loop", "",
-        f"Started from `{settings.get('policy')}`; last fine-tuned policy `{report.get('policy')}`.", "",
+        f"Started from `{report.start_policy}`; last fine-tuned policy `{report.policy}`.", "",
         f"**{advice.sentence}**", "",
         f"Policy to use: `{advice.policy}`.", "",
     ]
@@ -434,7 +427,7 @@ def _dependence_line(after: HeldOutComparison) -> Optional[str]:
     return f"- {'; '.join(parts)}" if parts else None
 
 
-def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
+def _rounds_table_lines(report: LoopReportBody) -> List[str]:
     """The table of the rounds, one line each, and the final policy against the starting one under it."""
     lines = [
         "| round | failures mined (against the policy) / episodes | clusters | kept | fine-tune / held-out scenarios "
@@ -448,7 +441,7 @@ def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
             f"| {row['round']} | {row['failures']} ({row['against']}) / {row['episodes']} | {row['clusters']} | "
             f"{row['kept']} | {row['split']} | {row['before']} | {row['control']} | {row['after']} | {row['drop']} | "
             f"{row['p']} | {row['p_control']} | {row['untouched']} | {row['verdict']} |")
-    final_line = _final_line(_report_final(report))
+    final_line = _final_line(report.final_vs_start)
     if final_line:
         lines += ["", final_line]
     return lines
@@ -569,10 +562,10 @@ def _round_lines(record: RoundRecord, settings: Mapping[str, Any]) -> List[str]:
     return lines
 
 
-def render_markdown(report: Mapping[str, Any]) -> str:
-    """The Markdown rendering of a loop report: heading and recommendation, settings, the rounds' table, and a
-    section per round."""
-    settings = report.get("settings", {})
+def render_markdown(report: LoopReportBody) -> str:
+    """The Markdown rendering of a loop report's body: heading and recommendation, settings, the rounds' table,
+    and a section per round."""
+    settings = report.settings.to_dict() if report.settings is not None else {}  # read by name
     lines: List[str] = _heading_lines(report) + _settings_lines(settings) + _rounds_table_lines(report)
     for record in report_rounds(report):
         lines += _round_lines(record, settings)

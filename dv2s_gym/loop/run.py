@@ -86,7 +86,7 @@ from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.loop.record import (
     ErroredEpisodes, FineTuneArm, HeldOutBefore, HeldOutComparison, HeldOutTests, LoopStart, MinedEntry, MiningSummary,
     RecordedLoopSettings, ReferenceGate, RegressComparison, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
-    UntouchedComparison, recorded)
+    UntouchedComparison, LoopReportBody, recorded)
 from dv2s_gym.loop.report import (errored_note, errored_text, rate_text, reference_gate_text,
                                          write_loop_reports)
 from dv2s_gym.loop.settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
@@ -158,7 +158,7 @@ class LoopReport:
         body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out),
                 "settings": self.settings.to_dict(), "policy": self.policy,
                 "rounds": [record.to_dict() for record in self.rounds]}
-        return {**body, "recommendation": recommendation(body).to_dict()}
+        return {**body, "recommendation": recommendation(LoopReportBody.from_dict(body)).to_dict()}
 
     @property
     def recommendation(self) -> Recommendation:
@@ -169,7 +169,7 @@ class LoopReport:
         if path is not None and Path(path).is_file():
             written = json.loads(Path(path).read_text(encoding="utf-8")).get("recommendation")
             return Recommendation.from_dict(written, source=str(path))
-        return recommendation(self.to_json())
+        return recommendation(LoopReportBody.from_dict(self.to_json()))
 
 
 # --------------------------------------------------------------------------- state
@@ -674,8 +674,8 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
     record = rounds[-1]
     start = loop.state.settings.policy
     # as the report judges it: the cross-round check on each accepted round's policy
-    body = loop_report.with_cross_round_checks({"settings": {"policy": start},
-                                                "rounds": [r.to_dict() for r in rounds]}, folder=loop.out)
+    body = loop_report.with_cross_round_checks(LoopReportBody.from_dict({"settings": {"policy": start},
+                                                "rounds": [r.to_dict() for r in rounds]}), folder=loop.out)
     advice = recommendation(body)
     # the policy to use, exactly as the report recommends it: the fine-tuned one only when it is the recommendation
     following = advice.policy
@@ -1299,5 +1299,5 @@ def _write(out: Path, state: _State) -> LoopReport:
     tuned = [r.new_policy for r in state.rounds if r.new_policy]
     last = tuned[-1] if tuned else state.settings.policy
     report = LoopReport(out=out, rounds=list(state.rounds), policy=last, paths={}, settings=state.settings)
-    report.paths = write_loop_reports(report.to_json(), out)
+    report.paths = write_loop_reports(LoopReportBody.from_dict(report.to_json()), out)
     return report

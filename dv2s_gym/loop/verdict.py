@@ -34,7 +34,7 @@ import dataclasses
 from typing import TYPE_CHECKING, Any, Dict, Mapping, Optional, Union
 
 from dv2s_gym.loop.record import (FamilyHarm, FamilyHarmRow, FinalVsStart, HeldOutComparison, HeldOutWorse,
-                                  RegressComparison, RegressSummary, RoundRecord, RoundSteps, recorded)
+                                  LoopReportBody, RegressComparison, RegressSummary, RoundRecord, RoundSteps, recorded)
 from dv2s_gym.loop.settings import DEFAULTS, LoopError
 
 if TYPE_CHECKING:  # the regression statistics load scipy, kept off the command line's start: imported where used
@@ -409,17 +409,11 @@ class Recommendation:
         return cls(**{name: data[name] for name in names})
 
 
-def _final_of(report: Mapping[str, Any]) -> Optional[FinalVsStart]:
-    """The report's own cross-round check (its ``final_vs_start``), read into its record; ``None`` without one."""
-    found = report.get("final_vs_start")
-    return None if found is None else FinalVsStart.from_dict(found)
-
-
-def recommendation(report: Mapping[str, Any]) -> Recommendation:
+def recommendation(report: LoopReportBody) -> Recommendation:
     """The loop's recommendation from its report (``report.json``'s body): the policy to use, the verdict on the
     last fine-tuned policy and why (:class:`Recommendation`)."""
-    start = (report.get("settings") or {}).get("policy")
-    rounds = [RoundRecord.from_dict(record) for record in report.get("rounds") or []]
+    start = report.start_policy
+    rounds = list(report.round_records)
     judged_rounds = [(record, judged) for record in rounds for judged in [judge_round(record)] if judged is not None]
     if not judged_rounds:
         return Recommendation(policy=start, verdict=NOT_ACCEPTED, round=None, candidate=None,
@@ -430,16 +424,16 @@ def recommendation(report: Mapping[str, Any]) -> Recommendation:
     for index, (record, judged) in enumerate(judged_rounds):
         # the cross-round check on this round's policy: the report's own for the last round, else the one
         # recorded with the round (the check over the rounds up to it)
-        final = (_final_of(report) if index == len(judged_rounds) - 1 and "final_vs_start" in report
+        final = (report.final_vs_start if index == len(judged_rounds) - 1 and report.cross_round_checked
                  else record.final_vs_start)
         judged = _with_cross_round_check(judged, final)
         judged_rounds[index] = (record, judged)
         if judged.verdict == ACCEPTED:
-            recommended = record.new_policy or report.get("policy")
+            recommended = record.new_policy or report.policy
         elif judged.decided_by == "final_vs_start" and judged.verdict == REJECTED:
             recommended = start  # the lineage regressed against the starting policy: back to it
     record, judged = judged_rounds[-1]
-    candidate = record.new_policy or report.get("policy")
+    candidate = record.new_policy or report.policy
     number = record.round
     if judged.verdict == ACCEPTED:
         sentence = f"ACCEPTED: use the round {number} fine-tuned policy {candidate}: {judged.reason}"
