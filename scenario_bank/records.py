@@ -8,7 +8,8 @@ Five records stand for the JSON objects the subsystems hand each other and write
 - :class:`EpisodeRecord`: one episode of a failure-mining run, a line of its ``episodes.jsonl`` (the scene, the
   policy's result and failure, the reference driver's outcome, the sampler's point). Its ``result`` is an
   :class:`EpisodeOutcome` (the policy's outcome measures), its ``failure`` a :class:`Failure` (what the failure
-  monitors found) and its ``behaviour`` a :class:`Behaviour` (who else was involved and what each side was doing).
+  monitors found), its ``reference`` a :class:`ReferenceOutcome` (the reference driver's episode on the same scene)
+  and its ``behaviour`` a :class:`Behaviour` (who else was involved and what each side was doing).
 - :class:`RegressEpisode`: one policy's episode of a regression run, a line of its ``results.jsonl`` and a result
   in its report (the episode's outcome measures, the failure kinds it counts, its trace, or the error it ended in).
 - :class:`HeldOutEpisode`: one episode of a loop's held-out evaluation, a line of a round's ``heldout.jsonl`` (the
@@ -43,7 +44,7 @@ from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_r
 from scenario_bank.story import StoryError, normalize_story
 
 __all__ = ["RecordError", "JsonRecord", "recorded", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode",
-           "HeldOutEpisode", "Failure", "Behaviour", "EpisodeOutcome", "UNKNOWN_PART", "BEHAVIOUR_PARTS",
+           "HeldOutEpisode", "Failure", "Behaviour", "EpisodeOutcome", "ReferenceOutcome", "UNKNOWN_PART", "BEHAVIOUR_PARTS",
            "SOURCE_KINDS", "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES",
            "SIDECAR_VERSION", "SCRIPT", "SIDECAR", "CONTROL_FIX", "control_character_field", "is_entry_file"]
 
@@ -755,6 +756,39 @@ class EpisodeOutcome(JsonRecord):
 
 
 @dataclass(frozen=True, eq=False)
+class ReferenceOutcome(JsonRecord):
+    """The reference driver's episode on the scene a policy failed in: the ``reference`` of an episode record
+    (:class:`EpisodeRecord`), as the miner writes it. The reference ``policy``'s spec, its ``failure`` (a
+    :class:`Failure`; ``None`` when it drove safely), the episode's ``trajectory_hash``, whether the ego ``collided``
+    and its smallest time to collision ``min_ttc`` [s] (``None`` when nothing ever closed in). Each field is
+    optional (a record written by hand may hold only some). Other keys are kept in ``extra``.
+
+    ``null_fields``: the fields written as ``null`` when ``None``; by default every one, as the miner writes them.
+    """
+
+    policy: Optional[str] = None
+    failure: Optional[Failure] = None
+    trajectory_hash: Optional[str] = None
+    collided: Optional[bool] = None
+    min_ttc: Optional[float] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _WHAT: ClassVar[str] = "reference outcome"
+
+    def __post_init__(self) -> None:
+        _read_nested(self)
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+    @property
+    def failure_type(self) -> Optional[str]:
+        """The type of the reference driver's failure, or ``None`` when it drove safely."""
+        return self.failure.type if self.failure is not None else None
+
+
+@dataclass(frozen=True, eq=False)
 class EpisodeRecord(JsonRecord):
     """One episode of a failure-mining run: a line of the run's ``episodes.jsonl``.
 
@@ -762,7 +796,7 @@ class EpisodeRecord(JsonRecord):
     ``seed`` and the script's sampled ``params``; the ``policy`` run on it and its ``result`` (an
     :class:`EpisodeOutcome`: :meth:`policies.evaluation.EpisodeResult.to_json`), its ``failure`` (``type``,
     ``kind``, ``time``, ...; ``None`` when it drove safely), robustness ``rho``, the reference driver's outcome on
-    the same scene (``reference``, ``avoidable``), the saved ``trace`` of a failed episode (relative to the run
+    the same scene (``reference``, a :class:`ReferenceOutcome`, and ``avoidable``), the saved ``trace`` of a failed episode (relative to the run
     folder), ``error`` (the episode could not run: no failure of the policy), a failure's ``behaviour`` (who else was
     involved and what each side was doing) and ``failure_state`` (the numbers describing the scene at the failure),
     the ``worker_restarts`` it survived, and the ``sampler`` with the ``point`` and ``proposal`` density it was drawn
@@ -780,7 +814,7 @@ class EpisodeRecord(JsonRecord):
     result: Optional[EpisodeOutcome] = None
     failure: Optional[Failure] = None
     rho: Optional[float] = None
-    reference: Optional[Mapping[str, Any]] = None
+    reference: Optional[ReferenceOutcome] = None
     avoidable: Optional[bool] = None
     trace: Optional[str] = None
     error: Optional[str] = None

@@ -20,7 +20,7 @@ def test_a_stateful_policy_against_itself_drives_alike_in_both_roles(tmp_path):
 def test_which_role_runs_first_alternates_from_pair_to_pair():
     tasks = plan_tasks({"candidate": "rule", "baseline": "idm"}, ["a", "b"], [0, 1], env_config={}, bank_dir=None,
                        trace_dir=None)
-    firsts = [tasks[i]["role"] for i in range(0, len(tasks), 2)]
+    firsts = [tasks[i].role for i in range(0, len(tasks), 2)]
     assert firsts == ["candidate", "baseline", "candidate", "baseline"]
-    assert all(tasks[i]["scenario"] == tasks[i + 1]["scenario"] and tasks[i]["seed"] == tasks[i + 1]["seed"]
+    assert all(tasks[i].scenario == tasks[i + 1].scenario and tasks[i].seed == tasks[i + 1].seed
                for i in range(0, len(tasks), 2))

@@ -29,8 +29,7 @@ __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary",
 import numpy as np
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.loop.record import PairedSummary, PairedTable
-from dv2s_gym.mining.monitors import DEFAULT_MONITOR
-from dv2s_gym.mining.tasks import HELDOUT, heldout_task
+from dv2s_gym.mining.tasks import HeldOutTask, heldout_task
 from scenario_bank.records import HeldOutEpisode
 from scenario_bank.run_paths import read_paths, record_paths
 from dv2s_gym.regress.stats import mcnemar_exact, PairedTable as Outcomes
@@ -85,8 +84,8 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
     worker before it counts as hung (``timeout``; default that of :class:`~dv2s_gym.workers.pool.LocalBackend`).
     """
     count = workers.workers if workers.workers is not None else (os.cpu_count() or 1)
-    tasks = [{"kind": HELDOUT, "role": role, "policy": policy, "scenario": scenario, "seed": int(seed),
-              "bank_dir": bank_dir, "env_config": dict(env_config or {}), "monitor": DEFAULT_MONITOR}
+    tasks = [HeldOutTask(role=role, policy=policy, scenario=scenario, seed=int(seed), bank_dir=bank_dir,
+                         env_config=dict(env_config or {})).to_json()
              for scenario, seed in episodes if store.get(role, scenario, seed) is None]
     bar = None
     if progress:

@@ -31,7 +31,7 @@ from dv2s_gym.mining.report_text import (breadth, by_type_text, clip_caption, pa
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
                                   fmt, fmt_interval, interval_mark, legend, row_label, svg, video_tag, x_scale)
 from scenario_bank.atomic import atomic_write_text
-from scenario_bank.records import Failure
+from scenario_bank.records import recorded
 
 __all__ = ["write_html", "render_html", "MAX_VIDEOS", "MAX_SCRIPT_CHARS"]
 
@@ -443,10 +443,9 @@ def _failure_rows(failures: Sequence[FailureEntry], limit: int = 200) -> str:
         return '<p class="muted">None.</p>'
     rows = []
     for f in failures[:limit]:
-        reference = f.reference or {}
-        ref_failure = Failure.of(reference.get("failure")) if isinstance(reference, Mapping) else None
-        ref_text = (f"{reference.get('policy', '?')}: "
-                    + (ref_failure.type if ref_failure is not None else "no failure") if reference else "–")
+        reference = f.reference
+        ref_text = (f"{reference.policy if reference.policy is not None else '?'}: "
+                    + (reference.failure_type or "no failure") if recorded(reference) else "–")
         rows.append([(escape(f.index), True), (_breakable(f.scenario), False),
                      (escape(f.seed), True), (escape(f.type), False), (escape(ref_text), False),
                      (f"<code>{_breakable(f.cluster)}</code>", False), (_breakable(f.trace or "–"), False)])

@@ -795,7 +795,7 @@ def _unavoidable_lines(report: MineReport) -> List[str]:
         lines += [""] + _cluster_rows(report.unavoidable_clusters)
     if report.unavoidable:
         lines += [""] + [f"- #{f.index} `{_cell(f.scenario)}` seed {f.seed}: {f.type} "
-                         f"(reference: {_cell(((f.reference or {}).get('failure') or {}).get('type'))}); "
+                         f"(reference: {_cell(f.reference.failure_type if f.reference is not None else None)}); "
                          f"cluster `{_cell(f.cluster)}`" for f in report.unavoidable[:50]]
         if len(report.unavoidable) > 50:
             lines.append(f"- ... and {len(report.unavoidable) - 50} more (see report.json)")

@@ -27,7 +27,7 @@ from dv2s_gym.mining.behaviour import Behaviour, behaviour_of
 from dv2s_gym.mining.conversion.record import ConversionRecord
 from dv2s_gym.mining.family import record_family
 from scenario_bank.errors import WrongTypeError
-from scenario_bank.records import EpisodeRecord, Failure, JsonRecord
+from scenario_bank.records import EpisodeRecord, Failure, JsonRecord, ReferenceOutcome
 
 __all__ = ["MineReport", "MineCounts", "SamplerSummary", "ScenarioSummary", "FailureEntry", "ClusterEntry",
            "RejectedConversion", "EpisodeError", "WorkerRestart", "mine_report"]
@@ -169,7 +169,7 @@ class FailureEntry(JsonRecord):
     min_ttc: Optional[float] = None
     rho: Optional[float] = None
     avoidable: Optional[bool] = None
-    reference: Optional[Mapping[str, Any]] = None
+    reference: Optional[ReferenceOutcome] = None
     cluster: Optional[str] = None
     behaviour: Optional[Behaviour] = None
     trace: Optional[str] = None

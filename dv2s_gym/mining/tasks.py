@@ -38,9 +38,10 @@ from dv2s_gym.workers.tasks import mark_built_in, register, task_id
 from policies import worker_cache
 from policies.evaluation import run_episode
 from scenario_bank.failure_types import failure_table, failure_type
-from scenario_bank.records import EpisodeRecord, HeldOutEpisode
+from scenario_bank.records import EpisodeRecord, HeldOutEpisode, ReferenceOutcome
 
-__all__ = ["MINE", "HELDOUT", "MineTask", "run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
+__all__ = ["MINE", "HELDOUT", "MineTask", "HeldOutTask", "run_mine_task", "heldout_task", "reference_avoids",
+           "trace_name"]
 
 MINE = "mine"
 """The ``"kind"`` of a failure-mining task."""
@@ -100,6 +101,41 @@ class MineTask:
                    bank_dir=data.get("bank_dir"), trace_dir=data.get("trace_dir"),
                    monitor=MonitorSettings.of(data.get("monitor")),
                    failure_types=tuple(data.get("failure_types") or ()))
+
+
+@dataclass(frozen=True)
+class HeldOutTask:
+    """One episode of a loop's held-out evaluation for a worker: the ``policy`` evaluated as ``role`` (``before``,
+    ``after``, ``control``...) on bank ``scenario`` at env ``seed``, the env (``bank_dir``: ``None`` for the shipped
+    bank, ``env_config``) and the ``monitor`` settings."""
+
+    role: str
+    policy: str
+    scenario: str
+    seed: int
+    bank_dir: Optional[str] = None
+    env_config: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    monitor: MonitorSettings = DEFAULT_MONITOR
+
+    kind: ClassVar[str] = HELDOUT
+    """Which registered function runs the task (:mod:`dv2s_gym.workers.tasks`)."""
+
+    def to_json(self) -> Dict[str, Any]:
+        """The task as a pool ships it (a plain JSON object; :meth:`from_json` reads it back)."""
+        return {"kind": self.kind, "role": self.role, "policy": self.policy, "scenario": self.scenario,
+                "seed": self.seed, "bank_dir": self.bank_dir, "env_config": dict(self.env_config),
+                "monitor": dataclasses.asdict(self.monitor)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> "HeldOutTask":
+        """The task a JSON object holds (:meth:`to_json`'s; the optional fields may be left out); one without a
+        ``role``, ``policy``, ``scenario`` or ``seed`` is a :class:`MiningError` naming what is missing."""
+        missing = [key for key in ("role", "policy", "scenario", "seed") if data.get(key) is None]
+        if missing:
+            raise MiningError(f"a held-out task needs {', '.join(missing)}; make it with HeldOutTask(...).to_json()")
+        return cls(role=data["role"], policy=data["policy"], scenario=data["scenario"], seed=int(data["seed"]),
+                   bank_dir=data.get("bank_dir"), env_config=dict(data.get("env_config") or {}),
+                   monitor=MonitorSettings.of(data.get("monitor")))
 
 
 def trace_name(index: int) -> str:
@@ -181,13 +217,12 @@ def run_mine_task(task: Mapping[str, Any]) -> EpisodeRecord:
     return _mine_record(scene, outcome, extra, nulls)
 
 
-def _reference_outcome(task: MineTask) -> Tuple[Dict[str, Any], Optional[Failure]]:
+def _reference_outcome(task: MineTask) -> Tuple[ReferenceOutcome, Optional[Failure]]:
     """The reference driver's episode on the task's scene, as the record's ``reference``, and its failure."""
     ref_result, ref_trace = _episode(task, task.reference)
     ref_failure = detect_failure(ref_result, ref_trace, task.monitor)
-    return {"policy": task.reference, "failure": ref_failure.to_json() if ref_failure else None,
-            "trajectory_hash": ref_result.trajectory_hash, "collided": ref_result.collided,
-            "min_ttc": ref_result.to_record().min_ttc}, ref_failure
+    return ReferenceOutcome(policy=task.reference, failure=ref_failure, trajectory_hash=ref_result.trajectory_hash,
+                            collided=ref_result.collided, min_ttc=ref_result.to_record().min_ttc), ref_failure
 
 
 def _check_detects(names) -> None:
@@ -208,19 +243,19 @@ def _mine_record(scene: Dict[str, Any], outcome: Dict[str, Any], extra: Dict[str
     return EpisodeRecord(**values, extra=extra, null_fields=nulls)
 
 
-def heldout_task(task: Mapping[str, Any]) -> HeldOutEpisode:
-    """Run one episode in this process: ``task`` has role, policy, scenario, seed, bank_dir,
-    env_config, monitor (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`). Returns its
-    :class:`~scenario_bank.records.HeldOutEpisode` (an exception becomes ``error``, never a failure)."""
+def heldout_task(shipped: Mapping[str, Any]) -> HeldOutEpisode:
+    """Run one episode in this process: ``shipped`` is a :class:`HeldOutTask`'s JSON object (as a pool ships it).
+    Returns its :class:`~scenario_bank.records.HeldOutEpisode` (an exception becomes ``error``, never a
+    failure)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    episode = HeldOutEpisode(role=task["role"], scenario=task["scenario"], seed=int(task["seed"]),
-                             policy=task["policy"])
+    task = HeldOutTask.from_json(shipped)
+    episode = HeldOutEpisode(role=task.role, scenario=task.scenario, seed=task.seed, policy=task.policy)
     env_key = None
     try:
-        env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
-        policy = worker_cache.policy_for(task["policy"], env_key, env)
-        result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
-        failure = detect_failure(result, trace, task.get("monitor") or DEFAULT_MONITOR)
+        env_key, env = worker_cache.env_for(task.bank_dir, task.env_config)
+        policy = worker_cache.policy_for(task.policy, env_key, env)
+        result, trace = run_episode(env, policy, task.scenario, task.seed)
+        failure = detect_failure(result, trace, task.monitor)
     except Exception as error:  # reported, never counted as a failure of the policy
         if env_key is not None:
             worker_cache.drop_env(env_key)

@@ -45,7 +45,7 @@ from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, code_ident
                                    resume_fingerprint)
 from dv2s_gym.regress.store import BASELINE_FINGERPRINT, RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
-from dv2s_gym.regress.tasks import KIND
+from dv2s_gym.regress.tasks import RegressTask
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.backends import get_backend
 from dv2s_gym.workers.settings import WorkerSettings
@@ -74,8 +74,8 @@ Scenarios = Union[None, str, Sequence[str]]
 def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterable[int], *,
                env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str],
                failure: Optional[Sequence[str]] = None, monitor: Optional[MonitorSettings] = None
-               ) -> List[Dict[str, Any]]:
-    """Task dicts, seed by seed (every scenario, then the next seed), each role in turn; which role goes first
+               ) -> List[RegressTask]:
+    """The run's tasks, seed by seed (every scenario, then the next seed), each role in turn; which role goes first
     alternates from pair to pair, so neither role is always the first to meet a scene; ``failure`` ``None``: the
     default failure kinds; ``monitor``: the monitors' settings (``None``: the defaults)."""
     monitor = monitor or MonitorSettings()
@@ -84,9 +84,9 @@ def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterab
     tasks = []
     for pair, (seed, scenario) in enumerate((seed, scenario) for seed in seeds for scenario in scenarios):
         for role, spec in (roles if pair % 2 == 0 else roles[::-1]):
-            tasks.append({"kind": KIND, "policy": spec, "role": role, "scenario": scenario, "seed": int(seed),
-                          "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir,
-                          "failure": list(failure), "monitor": monitor})
+            tasks.append(RegressTask(policy=spec, role=role, scenario=scenario, seed=int(seed),
+                                     env_config=dict(env_config), bank_dir=bank_dir, trace_dir=trace_dir,
+                                     failure=tuple(failure), monitor=monitor))
     return tasks
 
 
@@ -249,10 +249,10 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
                            trace_dir=str(store.traces_dir.resolve()), failure=plan.failure,
                            monitor=settings.monitor)
     if any(":" in spec.partition("?")[0] for spec in policies.values()):
-        for task in all_tasks:  # module:attribute specs are found in this folder in the workers too
-            task["python_path"] = [os.getcwd()]
+        # module:attribute specs are found in this folder in the workers too
+        all_tasks = [dataclasses.replace(task, python_path=(os.getcwd(),)) for task in all_tasks]
     episodes = _Episodes(plan, store, on_result)
-    episodes.results.update({_task_key(t): done[_task_key(t)] for t in all_tasks if _task_key(t) in done})
+    episodes.results.update({t.key: done[t.key] for t in all_tasks if t.key in done})
     episodes.bar = _progress(progress, total=len(all_tasks), initial=len(episodes.results))
     report_settings = _report_settings(plan, settings, workers)
     ran = _execute(plan, settings, workers, episodes, all_tasks, report_settings)
@@ -404,10 +404,6 @@ def _report_settings(plan: _Plan, settings: RegressSettings, workers: WorkerSett
     return recorded
 
 
-def _task_key(task: Dict[str, Any]) -> Tuple[str, str]:
-    return task_id(task["scenario"], task["seed"]), task["role"]
-
-
 class _Episodes:
     """The run's results as they arrive (saved, counted on the progress bar, timed per scenario), and the
     candidate/baseline pairs they make."""
@@ -452,7 +448,7 @@ class _Episodes:
 
 
 def _execute(plan: _Plan, settings: RegressSettings, workers: WorkerSettings, episodes: _Episodes,
-             all_tasks: List[Dict[str, Any]], report_settings: Dict[str, Any]) -> "_Ran":
+             all_tasks: List[RegressTask], report_settings: Dict[str, Any]) -> "_Ran":
     """Run the episodes not done yet (all at once, or batch by batch until the sequential test settles)."""
     runner = None
     ran = _Ran(seeds=list(plan.seeds))
@@ -461,7 +457,7 @@ def _execute(plan: _Plan, settings: RegressSettings, workers: WorkerSettings, ep
                              timeout=workers.timeout)
         report_settings["workers"] = getattr(runner, "workers", workers.workers)
         if not settings.sequential:
-            pending = [t for t in all_tasks if _task_key(t) not in episodes.results]
+            pending = [t.to_json() for t in all_tasks if t.key not in episodes.results]
             if pending:
                 runner.run(pending, episodes.handle)
         else:
@@ -488,7 +484,7 @@ class _Ran:
 
 
 def _run_sequential(plan: _Plan, settings: RegressSettings, runner: Any, episodes: _Episodes,
-                    all_tasks: List[Dict[str, Any]]) -> _Ran:
+                    all_tasks: List[RegressTask]) -> _Ran:
     """Run ``plan.batch`` seeds at a time, testing the pooled table after each, until it settles FAIL."""
     seeds, batch, names = plan.seeds, plan.batch, plan.names
     test = stats.SequentialTest(float(settings.margin), float(settings.alpha) * stats.DEFAULT_POOLED_WEIGHT,
@@ -497,7 +493,7 @@ def _run_sequential(plan: _Plan, settings: RegressSettings, runner: Any, episode
     ran_seeds, stopped_early = list(seeds), False
     for start in range(0, plan.episodes, batch):
         chunk = seeds[start:start + batch]
-        pending = [t for t in all_tasks if t["seed"] in chunk and _task_key(t) not in episodes.results]
+        pending = [t.to_json() for t in all_tasks if t.seed in chunk and t.key not in episodes.results]
         if pending:
             runner.run(pending, episodes.handle)
         pooled = stats.PairedTable.pooled(list(paired_tables(episodes.paired(seeds[:start + batch]), names).values()))

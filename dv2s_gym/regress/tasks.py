@@ -1,6 +1,7 @@
 """One regression episode in a worker process: :func:`run_regress_task`, registered as task kind ``"regress"``.
 
-A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes, Ray) can ship it:
+A task is a :class:`RegressTask`; a pool of :mod:`dv2s_gym.workers` (local processes, Ray) ships its JSON object
+(:meth:`RegressTask.to_json`), which :func:`run_regress_task` reads back (:meth:`RegressTask.from_json`):
 
 - ``kind``: ``"regress"``;
 - ``policy``: policy spec (:func:`policies.registry.load_policy`), e.g. ``"rule"``;
@@ -9,8 +10,9 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 - ``env_config``: ``DV2S-v0`` config overrides (dict, may be empty);
 - ``bank_dir``: bank folder (``None``: the shipped bank);
 - ``trace_dir``: folder for the trace of a failed episode (``None``: keep no trace);
-- ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; default collision, off-road, stall);
-- ``monitor``: the monitors' settings (an :class:`envs.safety_metrics.MonitorSettings`: its ``stall_seconds``).
+- ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; ``None``: collision, off-road, stall);
+- ``monitor``: the monitors' settings (an :class:`envs.safety_metrics.MonitorSettings`: its ``stall_seconds``);
+- ``python_path``: folders a ``module:attribute`` policy spec is found in (added to ``sys.path``).
 
 Every failure type with a ``result_field`` is recorded in that field as ``dv2s mine`` decides it
 (:func:`scenario_bank.failure_types.happened`): a type registered at run time
@@ -36,25 +38,79 @@ spec, so a worker serves any mix of tasks.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
 import traceback
 from pathlib import Path
-from typing import Any, Dict
+from typing import Any, ClassVar, Dict, Mapping, Optional, Tuple
 
 from dv2s_gym.workers.tasks import error_result, mark_built_in, register, task_id
 from policies import worker_cache
 from scenario_bank.records import RegressEpisode
+from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.failures import apply_failure, failure_kinds, parse_failure
 from scenario_bank.failure_types import failure_table, happened
 from envs.safety_metrics import MonitorSettings, total_stall_step
 from policies.evaluation import run_episode
 
-__all__ = ["KIND", "run_regress_task", "trace_filename"]
+__all__ = ["KIND", "RegressTask", "run_regress_task", "trace_filename"]
 
 KIND = "regress"
 """The ``"kind"`` of a regression task."""
+
+
+@dataclasses.dataclass(frozen=True)
+class RegressTask:
+    """One regression episode for a worker (the module docstring says what each field holds): the ``policy`` run
+    as ``role`` on ``scenario`` at env ``seed``, the env (``env_config``, ``bank_dir``), the folder of failed
+    episodes' traces (``trace_dir``), the ``failure`` kinds, the ``monitor`` settings and the ``python_path`` of a
+    ``module:attribute`` policy."""
+
+    policy: str
+    role: str
+    scenario: str
+    seed: int
+    env_config: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    bank_dir: Optional[str] = None
+    trace_dir: Optional[str] = None
+    failure: Optional[Tuple[str, ...]] = None
+    monitor: MonitorSettings = MonitorSettings()
+    python_path: Tuple[str, ...] = ()
+
+    kind: ClassVar[str] = KIND
+    """Which registered function runs the task (:mod:`dv2s_gym.workers.tasks`)."""
+
+    @property
+    def id(self) -> str:
+        """The episode's id in results: ``"<scenario>/<seed>"``."""
+        return task_id(self.scenario, self.seed)
+
+    @property
+    def key(self) -> Tuple[str, str]:
+        """``(id, role)``: the episode's place in the run (:attr:`scenario_bank.records.RegressEpisode.key`)."""
+        return self.id, self.role
+
+    def to_json(self) -> Dict[str, Any]:
+        """The task as a pool ships it (a plain JSON object; :meth:`from_json` reads it back)."""
+        return {"kind": self.kind, "policy": self.policy, "role": self.role, "scenario": self.scenario,
+                "seed": self.seed, "env_config": dict(self.env_config), "bank_dir": self.bank_dir,
+                "trace_dir": self.trace_dir, "failure": None if self.failure is None else list(self.failure),
+                "monitor": dataclasses.asdict(self.monitor), "python_path": list(self.python_path)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> "RegressTask":
+        """The task a JSON object holds (:meth:`to_json`'s; the optional fields may be left out); one without a
+        ``policy``, ``role``, ``scenario`` or ``seed`` is a :class:`RegressError` naming what is missing."""
+        missing = [key for key in ("policy", "role", "scenario", "seed") if data.get(key) is None]
+        if missing:
+            raise RegressError(f"a regression task needs {', '.join(missing)}; make it with RegressTask(...).to_json()")
+        failure = data.get("failure")
+        return cls(policy=data["policy"], role=data["role"], scenario=data["scenario"], seed=int(data["seed"]),
+                   env_config=dict(data.get("env_config") or {}), bank_dir=data.get("bank_dir"),
+                   trace_dir=data.get("trace_dir"), failure=None if failure is None else tuple(failure),
+                   monitor=MonitorSettings.of(data.get("monitor")), python_path=tuple(data.get("python_path") or ()))
 
 
 def trace_filename(role: str, scenario: str, seed: int) -> str:
@@ -62,23 +118,25 @@ def trace_filename(role: str, scenario: str, seed: int) -> str:
     return f"{scenario}__{int(seed)}__{role}.json.gz"
 
 
-def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
-    """Run one episode described by ``task`` (see the module docstring) and return its record."""
-    for folder in task.get("python_path") or []:  # where a module:attribute policy is found
+def run_regress_task(shipped: Mapping[str, Any]) -> RegressEpisode:
+    """Run the episode of the task ``shipped`` (a :class:`RegressTask`'s JSON object, as a pool ships it; see the
+    module docstring) and return its record."""
+    task = RegressTask.from_json(shipped)
+    for folder in task.python_path:  # where a module:attribute policy is found
         if folder not in sys.path:
             sys.path.append(folder)
-    unknown = [kind for kind in task.get("failure") or () if kind not in failure_kinds()]
+    unknown = [kind for kind in task.failure or () if kind not in failure_kinds()]
     if unknown:
-        return RegressEpisode.from_dict(error_result(task, (
+        return RegressEpisode.from_dict(error_result(shipped, (
             f"failure type {', '.join(unknown)} is not registered in this worker process: the plug-in module that "
             "registers it (imported by every worker) must register the type and its detector when it is imported, "
             "not later")))
     env_key = None
     try:
-        env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
-        policy = worker_cache.policy_for(task["policy"], env_key, env, owner=task["role"])  # one instance per role
+        env_key, env = worker_cache.env_for(task.bank_dir, task.env_config)
+        policy = worker_cache.policy_for(task.policy, env_key, env, owner=task.role)  # one instance per role
         started = time.perf_counter()
-        result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
+        result, trace = run_episode(env, policy, task.scenario, task.seed)
         seconds = time.perf_counter() - started
     except Exception as error:  # reported as an error episode, never dropped
         if env_key is not None:
@@ -86,20 +144,19 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
         message = " ".join(f"{type(error).__name__}: {error}".split())
         if os.environ.get("DV2S_DEBUG"):
             message += "\n" + traceback.format_exc()
-        return RegressEpisode.from_dict(error_result(task, message))
+        return RegressEpisode.from_dict(error_result(shipped, message))
     data = result.to_json()
-    monitor = MonitorSettings.of(task.get("monitor"))
+    monitor = task.monitor
     stall = total_stall_step(trace, monitor.stall_seconds)
     period = 1.0 / float(trace.config.get("policy_frequency", 5))
-    data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None, seconds=round(seconds, 4),
+    data.update(role=task.role, id=task.id, trace=None, seconds=round(seconds, 4),
                 stalled=stall is not None, stall_time=None if stall is None else stall * period)
     for row in failure_table():  # every kind decided as the miner decides it: by the detector registry
         if row.result_field:
             data[row.result_field] = happened(row.name, result, trace, monitor, recorded=data)
-    apply_failure(data, parse_failure(task.get("failure")))
-    trace_dir = task.get("trace_dir")
-    if data["failed"] and trace_dir:
-        path = Path(trace_dir) / trace_filename(task["role"], task["scenario"], task["seed"])
+    apply_failure(data, parse_failure(task.failure))
+    if data["failed"] and task.trace_dir:
+        path = Path(task.trace_dir) / trace_filename(task.role, task.scenario, task.seed)
         trace.save(path)
         data["trace"] = str(path)
     return RegressEpisode.from_dict(data)

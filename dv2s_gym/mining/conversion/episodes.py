@@ -71,9 +71,9 @@ def reference_passed(record: EpisodeRecord) -> bool:
     record = EpisodeRecord.from_dict(record)
     if record.avoidable is False:
         return False
-    if not record.reference:
+    if not recorded(record.reference):
         return True
-    return not reference_failed(record.failure, Failure.of(record.reference.get("failure")))
+    return not reference_failed(record.failure, record.reference.failure)
 
 
 def reference_outcome(source: Failure, episodes: List[Mapping[str, Any]], reference: str) -> Dict[str, Any]:

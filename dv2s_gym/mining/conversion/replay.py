@@ -64,7 +64,7 @@ def add_replay(record: EpisodeRecord, bank, settings: ConversionSettings, source
     (:func:`~dv2s_gym.mining.conversion.episodes.reference_passed`) is not replayed: ``{"entry": None, "note",
     "not_narrowed": {}}``."""
     if not reference_passed(record):
-        reference_failure = Failure.of((record.reference or {}).get("failure"))
+        reference_failure = record.reference.failure if record.reference is not None else None
         failed = reference_failure.type if reference_failure is not None else "not avoided"
         return {"entry": None, "not_narrowed": {}, "note": f"no replay entry: the reference driver failed this scene "
                                                           f"too ({failed}), so it is no failure the policy could have "
