@@ -8,8 +8,21 @@ import math
 from pathlib import Path
 from typing import Dict, List, Sequence
 
+from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, RegressReport, ReportSettings, SequentialOutcome
+from dv2s_gym.regress.report import build_report
 from policies.evaluation import make_eval_env, run_episode
 from policies.registry import load_policy
+
+
+def report_from_json(*, bank: dict, settings: dict, candidate: dict, baseline: dict | None, episodes: Sequence[dict],
+                     sequential: dict | None = None, **options) -> RegressReport:
+    """:func:`~dv2s_gym.regress.report.build_report` on the records of the JSON objects a report holds (the bank,
+    settings, policies, paired episodes and sequential outcome, as ``report.json`` writes them)."""
+    return build_report(bank=BankInfo.from_dict(bank), settings=ReportSettings.from_dict(settings),
+                        candidate=PolicyInfo.from_dict(candidate),
+                        baseline=None if baseline is None else PolicyInfo.from_dict(baseline),
+                        episodes=[PairedEpisode.from_dict(episode) for episode in episodes],
+                        sequential=None if sequential is None else SequentialOutcome.from_dict(sequential), **options)
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> Dict[str, float]:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import pytest
 
+from dv2s_gym.mining.conversion.interaction import FailureInteraction
 from dv2s_gym.mining.conversion.judge import judge_conversion
 from dv2s_gym.mining.conversion.parameters import compare_parameters
 from dv2s_gym.mining.conversion.param_meaning import fixed_quantities, quantity_uses
@@ -46,8 +47,8 @@ def script(placement: str, params: str = "", before: str = "") -> str:
 def judged(new_script: str, parent: str = PARENT, failing=None):
     """The parameter comparison and the judge's rejections of ``new_script`` as a conversion of the failure."""
     parameters = compare_parameters(failing or FAILING, new_script, parent, INTERACTION)
-    rejections = judge_conversion({"reproduction": REPRODUCED, "parameters": parameters}, INTERACTION,
-                                  {"type": "collision", "with_kind": "car"}, 0.3)
+    rejections = judge_conversion({"reproduction": REPRODUCED, "parameters": parameters},
+                                  FailureInteraction.from_dict(INTERACTION), {"type": "collision", "with_kind": "car"}, 0.3)
     return parameters, [str(r) for r in rejections]
 
 

@@ -13,7 +13,9 @@ from pathlib import Path
 from dv2s_gym.loop.record import LoopReportBody, RecordedLoopSettings, RoundRecord
 from dv2s_gym.loop.report import final_vs_start, write_loop_reports
 from dv2s_gym.loop.settings import LoopSettings
-from dv2s_gym.regress.report import build_report, write_json
+from dv2s_gym.regress.records import RegressReport
+from dv2s_gym.regress.report import write_json
+from regress_report_data import report_from_json
 
 NAMES = ["scenario_a", "scenario_b"]
 SEEDS = [0, 1, 2, 3]
@@ -31,9 +33,9 @@ def _regress(path: Path, candidate: str, baseline: str, cand_fail: set, base_fai
     episodes = [{"id": f"{n}:{s}", "scenario": n, "seed": s, "candidate": _result((n, s) in cand_fail),
                  "baseline": _result((n, s) in base_fail)} for n in NAMES for s in SEEDS]
     bank = {"path": "bank", "version": 1, "scenarios": NAMES, "hashes": hashes or {n: "h-" + n for n in NAMES}}
-    report = build_report(bank=bank, settings={"margin": 0.05, "alpha": 0.05, "episodes": 4, "seed": 0,
+    report = report_from_json(bank=bank, settings={"margin": 0.05, "alpha": 0.05, "episodes": 4, "seed": 0,
                                                       "failure": ["collision", "off_road"]},
-                          candidate={"spec": candidate}, baseline={"spec": baseline}, episodes=episodes)
+                              candidate={"spec": candidate}, baseline={"spec": baseline}, episodes=episodes)
     return str(write_json(report, path))
 
 
@@ -173,7 +175,7 @@ def test_the_loop_records_regression_report_paths_that_do_not_depend_on_the_work
     from dv2s_gym.loop.run import _regress_summary
 
     monkeypatch.chdir(tmp_path)
-    summary = _regress_summary({"verdict": "PASS"}, Path("out/loop/round_1/regress/report.json"))
+    summary = _regress_summary(RegressReport.from_json({"verdict": "PASS"}), Path("out/loop/round_1/regress/report.json"))
     assert summary.report == str(tmp_path.resolve() / "out/loop/round_1/regress/report.json")
 
 

@@ -14,6 +14,7 @@ import pytest
 
 import dv2s_gym.mining.conversion.convert as convert_module
 from dv2s_gym.loop.record import LoopReportBody
+from dv2s_gym.mining.conversion.interaction import FailureInteraction
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.conversion.episodes import reproduction_seeds, same_failure_class
 from dv2s_gym.mining.conversion.ranges import exact_number
@@ -479,7 +480,7 @@ def test_a_script_without_the_failures_interaction_is_rejected_though_the_policy
 def test_each_failed_check_of_the_judge_is_its_own_reason():
     from dv2s_gym.mining.conversion.judge import judge_conversion
 
-    interaction = {"kind": "car", "manoeuvres": ["brake", "stop"], "failure_type": "stall"}
+    interaction = FailureInteraction.from_dict({"kind": "car", "manoeuvres": ["brake", "stop"], "failure_type": "stall"})
     out = {"reproduction": {"k": 10, "reproduced": 2, "rate": 0.2, "interaction_shown": 1},
            "avoidability": {"reference": "rule", "k": 10, "failed": 6, "avoided_rate": 0.4}}
     reasons = [str(r) for r in judge_conversion(out, interaction, Failure("stall"), 0.3)]
@@ -502,7 +503,7 @@ def test_the_judge_rejects_a_script_whose_actors_or_parameter_ranges_are_not_the
     from dv2s_gym.mining.conversion.judge import judge_conversion
     from dv2s_gym.mining.conversion.parameters import compare_parameters
 
-    interaction = {"kind": "car", "manoeuvres": ["cut_in"]}
+    interaction = FailureInteraction.from_dict({"kind": "car", "manoeuvres": ["cut_in"]})
     failure = {"type": "collision", "with_kind": "car"}
     passing = {"reproduction": {"k": 10, "reproduced": 6, "rate": 0.6, "interaction_shown": 6},
                "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
@@ -562,7 +563,7 @@ def test_any_reference_failure_counts_against_the_new_scenario_whatever_its_clas
     assert outcome == {"reference": "rule", "k": 5, "failed": 3, "avoided_rate": pytest.approx(0.4),
                        "failures": {"collision:struck_from_behind": 2, "stall": 1}}
     out = {"reproduction": {"k": 5, "reproduced": 5, "rate": 1.0, "interaction_shown": 5}, "avoidability": outcome}
-    reasons = [str(r) for r in judge_conversion(out, {"kind": "car", "manoeuvres": ["stop"]}, rear, 0.3)]
+    reasons = [str(r) for r in judge_conversion(out, FailureInteraction.from_dict({"kind": "car", "manoeuvres": ["stop"]}), rear, 0.3)]
     assert reasons == ["avoidability: the reference driver rule failed in 3 of 5 episodes of the new scenario "
                        "(collision:struck_from_behind 2, stall 1); it must drive most of them without any "
                        "collision, off-road or stall"]
@@ -707,15 +708,16 @@ def test_the_judge_compares_parameter_names_without_case_and_never_prints_an_out
                "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
     judged = compare_parameters({"lead_speed": 12.0}, "param Lead_Speed = Range(5, 10)\n")
     assert judged["outside"] == ["lead_speed"] and judged["not_in_script"] == []
-    assert [str(r) for r in judge_conversion({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)] == [
+    assert [str(r) for r in judge_conversion({**passing, "parameters": judged}, FailureInteraction(), {"type": "collision"}, 0.3)] == [
         "parameters: the new scenario's ranges do not contain the failing values: lead_speed (the script's "
         "Lead_Speed) = 12 outside 5..10"]
     just_past = compare_parameters({"lead_speed": 10.00001}, "param lead_speed = Range(5, 10)\n")
-    assert [str(r) for r in judge_conversion({**passing, "parameters": just_past}, {}, {"type": "collision"}, 0.3)] == [
+    assert [str(r) for r in judge_conversion({**passing, "parameters": just_past}, FailureInteraction(), {"type": "collision"}, 0.3)] == [
         "parameters: the new scenario's ranges do not contain the failing values: lead_speed = 10.00001 "
         "outside 5..10"]
     below = compare_parameters({"gap": 5.0000001}, "param gap = Range(5.0000002, 9)\n")
-    assert "gap = 5.0000001 outside 5.0000002..9" in str(judge_conversion({**passing, "parameters": below}, {},
+    assert "gap = 5.0000001 outside 5.0000002..9" in str(judge_conversion({**passing, "parameters": below},
+                                                                          FailureInteraction(),
                                                                           {"type": "collision"}, 0.3)[0])
 
 
@@ -785,7 +787,7 @@ def test_the_judge_compares_a_failing_parameter_with_the_generated_one_that_sets
     assert judged["outside"] == ["cut_in_gap", "start_offset"]  # 8 outside 10..15, -6 outside 7..11
     passing = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interaction_shown": 10},
                "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
-    unread, reason = [str(r) for r in judge_conversion({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    unread, reason = [str(r) for r in judge_conversion({**passing, "parameters": judged}, FailureInteraction(), {"type": "collision"}, 0.3)]
     # with no actor named, every actor's placement is key: the walker to the right of its spot, the new script's
     # pedestrian to the left of its own
     assert unread.startswith("parameters: a key quantity (of the failure's interaction) is placed by another quantity "
@@ -862,7 +864,7 @@ def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_coun
     failing = {**_CUT_FAILING, "kerb_offset": 2.8}
     judged = compare_parameters(failing, opaque, parent=_CUT_PARENT + "param kerb_offset = Range(2, 3)\n")
     assert judged["outside"] == ["lane_change_duration"]
-    key, reason = [str(r) for r in judge_conversion({**_PASSING, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    key, reason = [str(r) for r in judge_conversion({**_PASSING, "parameters": judged}, FailureInteraction(), {"type": "collision"}, 0.3)]
     # the cutter's gap is a quantity of the failure's interaction the new script sets by its own g: a rejection too
     assert key.startswith("parameters: a key parameter") and "cut_in_gap (the Car cutter's behaviour argument" in key
     assert reason.endswith("(not compared: cut_in_gap whose counterpart's distribution is not an interval the judge "
@@ -911,7 +913,7 @@ def _judged(generated, parent=_CUT_PARENT, failing=_CUT_FAILING):
     from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     compared = compare_parameters(failing, generated, parent=parent)
-    return compared, [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
+    return compared, [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, FailureInteraction(), {"type": "collision"}, 0.3)]
 
 
 def test_parameters_named_alike_but_swapped_are_not_compared_and_the_judge_rejects():
@@ -999,12 +1001,12 @@ def test_the_failures_actors_must_be_the_scene_in_a_majority_of_the_runs():
 
     split = compare_actors({"car": 1}, [{"car": 1}] * 4 + [{"car": 1, "pedestrian": 1}] * 3 + [{"car": 2}] * 3, "car")
     assert split["script"] == {"car": 1} and split["runs_matching"] == 4 and not split["same"]
-    (reason,) = [str(r) for r in judge_conversion({**_PASSING, "actors": split}, {}, {"type": "collision"}, 0.3)]
+    (reason,) = [str(r) for r in judge_conversion({**_PASSING, "actors": split}, FailureInteraction(), {"type": "collision"}, 0.3)]
     assert reason.startswith("actors:") and "in only 4 of 10 runs (a majority needed)" in reason
     tie = compare_actors({"car": 1}, [{"car": 1}] * 5 + [{"car": 1, "pedestrian": 1}] * 5, "car")
     assert not tie["same"]
     most = compare_actors({"car": 1}, [{"car": 1}] * 6 + [{"car": 2}] * 4, "car")
-    assert most["same"] and not judge_conversion({**_PASSING, "actors": most}, {}, {"type": "collision"}, 0.3)
+    assert most["same"] and not judge_conversion({**_PASSING, "actors": most}, FailureInteraction(), {"type": "collision"}, 0.3)
 
 
 # --------------------------------------------------------------------------- a counterpart through an affine expression
@@ -1307,7 +1309,7 @@ def test_a_key_parameter_the_new_script_sets_by_its_own_parameter_must_be_compar
     from dv2s_gym.mining.conversion.judge import judge_conversion
     from dv2s_gym.mining.conversion.parameters import compare_parameters
 
-    interaction = {"actor": "merger", "kind": "car"}
+    interaction = FailureInteraction.from_dict({"actor": "merger", "kind": "car"})
     compared = compare_parameters(_KEY_FAILING, _key_script(gap_expression, extra), parent=_KEY_PARENT,
                                   interaction=interaction)
     assert compared["key"] == {"ego_speed": "the ego's speed", "gap": "the Car merger's behaviour argument gap",
@@ -1330,7 +1332,7 @@ def test_a_parameter_of_an_actor_beside_the_interaction_stays_within_the_half_ru
     from dv2s_gym.mining.conversion.judge import judge_conversion
     from dv2s_gym.mining.conversion.parameters import compare_parameters
 
-    interaction = {"actor": "merger", "kind": "car"}
+    interaction = FailureInteraction.from_dict({"actor": "merger", "kind": "car"})
     generated = (_KEY_PARENT.replace("param traffic_speed = Range(20, 30)", "param w = Range(4, 6)")
                  .replace("globalParameters.traffic_speed", "globalParameters.w * globalParameters.w"))
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction=interaction)
@@ -1355,7 +1357,7 @@ def test_a_key_quantity_the_new_script_fixes_without_a_parameter_must_hold_the_f
     generated = _key_script(fixed).replace("param g = Range(5, 11)\n", "")
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction={"actor": "merger"})
     assert "gap" in compared["not_comparable"] and compared["key_not_compared"] == {}
-    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, FailureInteraction(), {"type": "collision"}, 0.3)]
     if holds:
         assert reasons == [] and compared["key_fixed_outside"] == {}
         return
@@ -1390,7 +1392,7 @@ def test_a_key_quantity_fixed_away_from_the_failing_value_is_rejected_whatever_e
     from dv2s_gym.mining.conversion.judge import judge_conversion
     from dv2s_gym.mining.conversion.parameters import compare_parameters
 
-    interaction = {"actor": "merger", "kind": "car"}
+    interaction = FailureInteraction.from_dict({"actor": "merger", "kind": "car"})
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction=interaction)
     reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert reasons and reasons[0].startswith("parameters: a key quantity (of the failure's interaction) that the new "
@@ -1412,7 +1414,7 @@ def test_a_fixed_key_value_holds_the_failing_value_within_the_replay_narrowing_o
     assert FIXED_TOLERANCE == NARROW == 0.02
     generated = _key_script(fixed).replace("param g = Range(5, 11)\n", "")
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction={"actor": "merger"})
-    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
+    reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, FailureInteraction(), {"type": "collision"}, 0.3)]
     assert (reasons == []) is holds
     assert (compared["key_fixed_outside"] == {}) is holds
 
@@ -1423,7 +1425,7 @@ def test_the_tolerance_of_a_fixed_key_value_follows_the_parents_expression():
     from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     parent = _KEY_PARENT.replace("    with speed 25,\n", "    with speed globalParameters.ego_speed + 5,\n")
-    interaction = {"actor": "merger", "kind": "car"}
+    interaction = FailureInteraction.from_dict({"actor": "merger", "kind": "car"})
     for speed, holds in (("25.1", True), ("24.87", True), ("25.2", False), ("24.8", False)):
         generated = parent.replace("    with speed globalParameters.ego_speed + 5,\n", f"    with speed {speed},\n")
         compared = compare_parameters(_KEY_FAILING, generated, parent=parent, interaction=interaction)
@@ -1459,7 +1461,7 @@ def test_a_key_behaviour_argument_the_behaviour_assigns_anew_is_rejected(stateme
 
     generated = _OVERRIDE_PARENT.replace("    take SetWalkingSpeedAction(pace)\n",
                                          f"    {statement}\n    take SetWalkingSpeedAction(pace)\n")
-    interaction = {"actor": "walker", "kind": "pedestrian"}
+    interaction = FailureInteraction.from_dict({"actor": "walker", "kind": "pedestrian"})
     assert [str(r) for r in judge_conversion({**_PASSING, "parameters": compare_parameters(
         _OVERRIDE_FAILING, _OVERRIDE_PARENT, parent=_OVERRIDE_PARENT, interaction=interaction)},
         interaction, {"type": "collision"}, 0.3)] == []
@@ -1482,7 +1484,7 @@ def test_a_behaviour_the_parent_overrides_alike_is_no_override():
 
     parent = _OVERRIDE_PARENT.replace("    take SetWalkingSpeedAction(pace)\n",
                                       "    pace = pace + 0.1\n    take SetWalkingSpeedAction(pace)\n")
-    interaction = {"actor": "walker", "kind": "pedestrian"}
+    interaction = FailureInteraction.from_dict({"actor": "walker", "kind": "pedestrian"})
     compared = compare_parameters(_OVERRIDE_FAILING, parent, parent=parent, interaction=interaction)
     assert "key_overridden" not in compared
     assert judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3) == []
@@ -1499,7 +1501,7 @@ def test_the_egos_target_speed_is_read_as_its_speed(target, holds):
     generated = _OVERRIDE_PARENT.replace("    with speed globalParameters.ego_speed\n",
                                          "    with speed globalParameters.ego_speed,\n"
                                          f"    with behavior FollowLaneBehavior(target_speed={target})\n")
-    interaction = {"actor": "walker", "kind": "pedestrian"}
+    interaction = FailureInteraction.from_dict({"actor": "walker", "kind": "pedestrian"})
     compared = compare_parameters(_OVERRIDE_FAILING, generated, parent=_OVERRIDE_PARENT, interaction=interaction)
     reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert (reasons == []) is holds
@@ -1512,7 +1514,7 @@ def test_a_behaviour_of_the_same_name_and_arguments_keeps_its_argument_check():
     still checked (a behaviour renamed, or with other arguments, may read it otherwise and is not)."""
     from dv2s_gym.mining.conversion.parameters import compare_parameters
 
-    interaction = {"actor": "walker", "kind": "pedestrian"}
+    interaction = FailureInteraction.from_dict({"actor": "walker", "kind": "pedestrian"})
     edited = _OVERRIDE_PARENT.replace("    wait\n", "    wait\n    wait\n").replace(
         "Walk(globalParameters.pace,", "Walk(3,")
     assert list(compare_parameters(_OVERRIDE_FAILING, edited, parent=_OVERRIDE_PARENT,
@@ -1551,7 +1553,7 @@ def test_a_key_placement_set_by_a_product_of_parameters_is_compared_jointly(ego_
                  .replace("pointAlongBy(-globalParameters.ego_distance)",
                           "pointAlongBy(-(globalParameters.ego_speed * (globalParameters.lead + globalParameters.lag)))"))
     failing = {**_JUNCTION_FAILING, "ego_distance": ego_distance}
-    interaction = {"actor": "bus", "kind": "bus"}
+    interaction = FailureInteraction.from_dict({"actor": "bus", "kind": "bus"})
     compared = compare_parameters(failing, generated, parent=_JUNCTION_PARENT, interaction=interaction)
     assert compared["key_not_compared"] == {}
     assert compared["compared"]["ego_distance"]["jointly"] == "the ego's longitudinal placement"
@@ -1585,7 +1587,7 @@ def test_a_relative_speed_rewritten_as_absolute_is_compared_jointly(speed_range,
     generated = (_JUNCTION_PARENT.replace("param bus_extra = Range(1, 3)", "")
                  .replace("param bus_speed = Range(7, 11)", f"param bus_v = {speed_range}")
                  .replace("globalParameters.bus_speed + globalParameters.bus_extra", "globalParameters.bus_v"))
-    interaction = {"actor": "bus", "kind": "bus"}
+    interaction = FailureInteraction.from_dict({"actor": "bus", "kind": "bus"})
     compared = compare_parameters(_JUNCTION_FAILING, generated, parent=_JUNCTION_PARENT, interaction=interaction)
     reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert (reasons == []) is holds, reasons
@@ -1602,7 +1604,7 @@ def test_a_normal_parameter_is_read_as_three_standard_deviations_about_its_mean(
 
     assert NORMAL_SPREAD == 3.0
     generated = _OVERRIDE_PARENT.replace("param pace = Range(1.0, 2.0)", f"param pace = {distribution}")
-    interaction = {"actor": "walker", "kind": "pedestrian"}
+    interaction = FailureInteraction.from_dict({"actor": "walker", "kind": "pedestrian"})
     compared = compare_parameters(_OVERRIDE_FAILING, generated, parent=_OVERRIDE_PARENT, interaction=interaction)
     assert "pace" in compared["compared"]
     reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
@@ -1623,7 +1625,7 @@ def test_an_actor_made_in_a_top_level_loop_that_runs_is_read_as_made_at_the_top_
                                          f"{loop}\n    walker = new Pedestrian ahead of ego by 30,\n"
                                          "        with name \"walker\",\n")
     assert loop in generated
-    interaction = {"actor": "walker", "kind": "pedestrian"}
+    interaction = FailureInteraction.from_dict({"actor": "walker", "kind": "pedestrian"})
     compared = compare_parameters(_OVERRIDE_FAILING, generated, parent=_OVERRIDE_PARENT, interaction=interaction)
     reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
     assert (sorted(compared["compared"]) == ["ego_speed", "gap", "pace"]) is runs
@@ -1656,7 +1658,7 @@ def test_a_parameter_compared_on_its_key_quantity_stays_compared_when_another_qu
 
     generated = _SLOWER_PARENT.replace("globalParameters.ego_speed - globalParameters.slower_by", speed)
     failing = {"ego_speed": 20.0, "slower_by": 3.0, "gap": 6.0}
-    interaction = {"actor": "drifter", "kind": "car"}
+    interaction = FailureInteraction.from_dict({"actor": "drifter", "kind": "car"})
     compared = compare_parameters(failing, generated, parent=_SLOWER_PARENT, interaction=interaction)
     assert "ego_speed" in compared["compared"] and compared["key_not_compared"] == {}
     assert "the Car drifter's speed" in compared["quantities_not_compared"]["ego_speed"]
@@ -1697,7 +1699,7 @@ def test_each_bank_scenario_judged_against_itself_compares_every_parameter():
         compared = compare_parameters(failing, script, parent=script)
         assert compared["not_comparable"] == {} and compared["outside"] == [], name
         assert len(compared["compared"]) == len(failing), name
-        assert judge_conversion({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3) == [], name
+        assert judge_conversion({**_PASSING, "parameters": compared}, FailureInteraction(), {"type": "collision"}, 0.3) == [], name
 
 
 @pytest.mark.parametrize("expression", ["(globalParameters.g + 1e16) - 1e16", "globalParameters.g + 1e400",

@@ -136,7 +136,7 @@ def _junit_of(tables, errors=0, baseline=True):
     import tempfile
 
     from dv2s_gym.regress.junit import write_junit
-    from dv2s_gym.regress.report import build_report
+    from regress_report_data import report_from_json
 
     episodes = []
     for name, outcomes in tables.items():
@@ -147,8 +147,8 @@ def _junit_of(tables, errors=0, baseline=True):
     for k in range(errors):
         episodes[k] = dict(episodes[k], candidate={"error": "RuntimeError: boom"})
     bank = {"path": "x", "version": "v", "scenarios": list(tables), "hashes": {n: "h" for n in tables}}
-    report = build_report(bank=bank, settings={"episodes": 1, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
-                          candidate={"spec": "new"}, baseline={"spec": "old"} if baseline else None, episodes=episodes)
+    report = report_from_json(bank=bank, settings={"episodes": 1, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
+                              candidate={"spec": "new"}, baseline={"spec": "old"} if baseline else None, episodes=episodes)
     with tempfile.TemporaryDirectory() as folder:
         write_junit(report, f"{folder}/junit.xml")
         root = ET.parse(f"{folder}/junit.xml").getroot()
@@ -206,16 +206,17 @@ def test_markdown_has_the_comparison_table(noisy_run):
 
 
 def test_markdown_puts_the_regressed_scenarios_first_and_fits_a_comment(tmp_path):
-    from dv2s_gym.regress.report import MARKDOWN_LIMIT, build_report, write_markdown
+    from dv2s_gym.regress.report import MARKDOWN_LIMIT, write_markdown
+    from regress_report_data import report_from_json
 
     tables = {"calm": [(False, False)] * 40, "broken": [(True, False)] * 12 + [(False, False)] * 28,
               "alpha": [(False, False)] * 40}
     episodes = [{"id": f"{n}/{k}", "scenario": n, "seed": k, "candidate": {"failed": c, "collided": c},
                  "baseline": {"failed": b, "collided": b}} for n, rows in tables.items() for k, (c, b) in enumerate(rows)]
     bank = {"path": "x", "version": "v", "scenarios": list(tables), "hashes": {n: "h" for n in tables}}
-    report = build_report(bank=bank, settings={"episodes": 40, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
-                          candidate={"spec": "new"}, baseline={"spec": "old", "report": str(tmp_path / "old" / "report.json")},
-                          episodes=episodes)
+    report = report_from_json(bank=bank, settings={"episodes": 40, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
+                              candidate={"spec": "new"}, baseline={"spec": "old", "report": str(tmp_path / "old" / "report.json")},
+                              episodes=episodes)
     text = write_markdown(report, tmp_path / "out" / "report.md").read_text()
     first = text.splitlines()[2]
     assert first.startswith("**FAIL**: the candidate fails more often in `broken` +30.0 pp [")
@@ -341,7 +342,7 @@ def test_a_worker_that_crashes_or_hangs_is_retried_once_then_reported(tmp_path, 
 
 @pytest.mark.slow
 def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp_path):
-    from dv2s_gym.regress.report import build_report
+    from regress_report_data import report_from_json
 
     backend = LocalBackend(workers=1, timeout=60)
     results = []
@@ -359,23 +360,23 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     episodes = [{"id": f"s/{k}", "scenario": "s", "seed": k, "candidate": ok, "baseline": ok} for k in range(200)]
     bank = {"path": "x", "version": "v", "scenarios": ["s"], "hashes": {"s": "h"}}
     settings = {"episodes": 200, "seed": 0, "margin": 0.05, "alpha": 0.05, "failure": ["collision", "off_road"]}
-    clean = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
-                         episodes=episodes)
+    clean = report_from_json(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
+                             episodes=episodes)
     assert clean.to_dict()["verdict"] == "PASS"
     episodes[0] = dict(episodes[0], candidate=by_seed[4])
-    broken = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
-                          episodes=episodes)
+    broken = report_from_json(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
+                              episodes=episodes)
     assert broken.to_dict()["verdict"] == "ERROR" and "ended in an error" in broken.to_dict()["overall"]["comparison"]["reason"]
     assert broken.to_dict()["scenarios"]["s"]["comparison"]["verdict"] == "ERROR"
     assert broken.to_dict()["errors"] == [{"id": "s/0", "role": "candidate", "error": by_seed[4]["error"]}]
     # so does a FAIL: an error is never hidden behind another verdict
     failing = [dict(e, candidate=dict(ok, failed=True)) for e in episodes]
     failing[0] = episodes[0]
-    assert build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
-                        episodes=failing).to_dict()["verdict"] == "ERROR"
+    assert report_from_json(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
+                            episodes=failing).to_dict()["verdict"] == "ERROR"
     # and a measures-only run with an error has the verdict ERROR, not none
-    alone = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline=None,
-                         episodes=[dict(e, baseline=None) for e in episodes])
+    alone = report_from_json(bank=bank, settings=settings, candidate={"spec": "a"}, baseline=None,
+                             episodes=[dict(e, baseline=None) for e in episodes])
     assert alone.to_dict()["verdict"] == "ERROR" and "1 episode ended in an error" in alone.to_dict()["error_reason"]
 
 

@@ -48,19 +48,20 @@ def test_stratified_bootstrap_resamples_within_scenarios():
 
 
 def test_report_carries_the_aggregates_as_context():
-    from dv2s_gym.regress.report import _markdown, build_report
+    from dv2s_gym.regress.report import _markdown
+    from regress_report_data import report_from_json
 
     rng = np.random.default_rng(6)
     episodes = [{"id": f"s/{k}", "scenario": "s", "seed": k,
                  "candidate": {"failed": False, "episode_return": float(rng.normal(2))},
                  "baseline": {"failed": False, "episode_return": float(rng.normal(0))}} for k in range(30)]
     bank = {"path": "x", "version": "v", "scenarios": ["s"], "hashes": {"s": "h"}}
-    report = build_report(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
-                          candidate={"spec": "new"}, baseline={"spec": "old"}, episodes=episodes)
+    report = report_from_json(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
+                              candidate={"spec": "new"}, baseline={"spec": "old"}, episodes=episodes)
     poi = report.to_dict()["aggregates"]["probability_of_improvement"]
     assert poi["value"] > 0.8 and poi["low"] <= poi["value"] <= poi["high"]
     assert "probability of improvement" in _markdown(report) and "the verdict is the paired failure test" in _markdown(report)
-    alone = build_report(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
-                         candidate={"spec": "new"}, baseline=None, episodes=[dict(e, baseline=None) for e in episodes])
+    alone = report_from_json(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
+                             candidate={"spec": "new"}, baseline=None, episodes=[dict(e, baseline=None) for e in episodes])
     assert alone.aggregates is None and return_aggregates([PairedEpisode.from_dict(dict(e, baseline=None))
                                                                   for e in episodes]) is None

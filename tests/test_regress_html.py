@@ -14,6 +14,7 @@ import pytest
 
 from dv2s_gym.regress.clips import ClipError, render_episode_video
 from dv2s_gym.regress.html import write_html
+from dv2s_gym.regress.records import RegressReport
 
 from regress_report_data import make_report
 from browser_helpers import body_attributes
@@ -34,7 +35,7 @@ def report(report_dir) -> dict:
 
 @pytest.mark.slow
 def test_the_page_is_one_file_with_no_external_resource(report_dir, report, tmp_path):
-    page = write_html(report, report_dir / "report.html").read_text()
+    page = write_html(RegressReport.from_json(report), report_dir / "report.html").read_text()
     assert page.startswith("<!DOCTYPE html>")
     assert not re.search(r"<(link|iframe|img|object|embed)\b", page)
     assert not re.search(r"""\b(src|href)\s*=\s*["'](?!data:|#)""", page), "a resource loaded from outside the page"
@@ -61,7 +62,7 @@ def test_clips_are_grouped_by_scenario_regressed_first_and_rows_sorted_by_severi
         if episode["id"] in newly:
             episode["candidate"]["failed"], episode["baseline"]["failed"] = True, False
     report["newly_failing"] = [i for i in newly if i.startswith(other)] + [i for i in newly if i.startswith(worse)]
-    page = write_html(report, tmp_path / "r.html", render_videos=False).read_text()
+    page = write_html(RegressReport.from_json(report), tmp_path / "r.html", render_videos=False).read_text()
     sections = re.findall(r'<section class="scenario-clips" data-scenario="([^"]+)">', page)
     assert sections == [worse, other]  # every clip goes to its own scenario, the regressed one first
     first, second = page.split('data-scenario="')[1:3]
@@ -80,13 +81,13 @@ def test_the_baseline_clip_is_a_rerun_when_its_run_kept_no_trace(report_dir, rep
     first = report["newly_failing"][0]
     for episode in report["episodes"]:
         episode["baseline"]["trace"] = None  # as in a real run: only failed episodes keep a trace
-    page = write_html(report, report_dir / "rerun.html", max_videos=1).read_text()
+    page = write_html(RegressReport.from_json(report), report_dir / "rerun.html", max_videos=1).read_text()
     pair = page.split('class="clip pair"')[1]
     assert first in pair and pair.count("<video ") == 2
     # a run that does not reproduce the report's trajectory is not shown as if it were the same scene
     episode = next(e for e in report["episodes"] if e["id"] == first)
     episode["baseline"]["trajectory_hash"] = "0" * 64
-    page = write_html(report, report_dir / "rerun2.html", max_videos=1).read_text()
+    page = write_html(RegressReport.from_json(report), report_dir / "rerun2.html", max_videos=1).read_text()
     pair = page.split('class="clip pair"')[1]
     assert pair.count("<video ") == 1 and "did not reproduce" in pair
 
@@ -98,7 +99,7 @@ def test_a_report_without_baseline_has_no_difference_plot(report, tmp_path):
         episode["baseline"] = None
     for entry in [*report["scenarios"].values(), report["overall"]]:
         entry.update(baseline=None, comparison=None)
-    page = write_html(report, tmp_path / "r.html").read_text()
+    page = write_html(RegressReport.from_json(report), tmp_path / "r.html").read_text()
     assert page.count('<svg class="plot"') == 4
     assert "No verdict" in page and "<video" not in page
 
@@ -112,7 +113,7 @@ def test_strings_from_the_report_are_escaped(report, tmp_path):
     report["candidate"]["spec"] = hostile
     report["regressed"] = [hostile]
     report["errors"] = [{"id": hostile, "role": "candidate", "error": hostile}]
-    page = write_html(report, tmp_path / "r.html", render_videos=False).read_text()
+    page = write_html(RegressReport.from_json(report), tmp_path / "r.html", render_videos=False).read_text()
     assert "<script>alert" not in page
     assert "<img" not in page
     assert "&lt;script&gt;alert(&quot;x&quot;)&lt;/script&gt;&amp;&lt;img src=x onerror=alert(1)&gt;" in page
@@ -121,7 +122,7 @@ def test_strings_from_the_report_are_escaped(report, tmp_path):
 
 @pytest.mark.slow
 def test_chromium_loads_the_page_renders_the_plots_and_plays_a_clip(report_dir, report):
-    page = write_html(report, report_dir / "report.html")
+    page = write_html(RegressReport.from_json(report), report_dir / "report.html")
     attributes = body_attributes(page)
     assert attributes.get("data-plots") == "5", attributes
     assert attributes.get("data-plots-rendered") == "5", attributes  # every SVG has a non-empty box
@@ -137,7 +138,7 @@ def test_chromium_loads_the_page_renders_the_plots_and_plays_a_clip(report_dir, 
 def test_chromium_reports_a_corrupt_clip_as_not_played(report, tmp_path):
     first = report["newly_failing"][0]
     corrupt = b"\x1a\x45\xdf\xa3" + bytes(range(256)) * 40  # an EBML magic number, then garbage
-    page = write_html(report, tmp_path / "r.html", videos={first: corrupt}, render_videos=False, max_videos=1)
+    page = write_html(RegressReport.from_json(report), tmp_path / "r.html", videos={first: corrupt}, render_videos=False, max_videos=1)
     attributes = body_attributes(page)
     assert attributes.get("data-plots-rendered") == "5", attributes
     assert attributes.get("data-video-played") == "false", attributes
@@ -148,7 +149,7 @@ def test_given_clips_are_embedded_as_they_are(report, tmp_path):
     clip = tmp_path / "given.webm"
     clip.write_bytes(b"not really a video, embedded as given")
     first = report["newly_failing"][0]
-    page = write_html(report, tmp_path / "r.html", videos={first: clip, f"{first}#baseline": clip},
+    page = write_html(RegressReport.from_json(report), tmp_path / "r.html", videos={first: clip, f"{first}#baseline": clip},
                       render_videos=False).read_text()
     assert page.count("<video ") == 2
     assert "bm90IHJlYWxseSBhIHZpZGVv" in page  # base64 of the bytes
@@ -159,12 +160,12 @@ def test_a_missing_trace_is_noted_instead_of_a_clip(report, tmp_path):
     report = copy.deepcopy(report)
     for episode in report["episodes"]:
         episode["candidate"]["trace"] = None
-    page = write_html(report, tmp_path / "r.html").read_text()
+    page = write_html(RegressReport.from_json(report), tmp_path / "r.html").read_text()
     assert "<video" not in page and "no trace was recorded" in page
 
 
 def test_clips_are_capped(report, tmp_path):
-    page = write_html(report, tmp_path / "r.html", render_videos=False, max_videos=1).read_text()
+    page = write_html(RegressReport.from_json(report), tmp_path / "r.html", render_videos=False, max_videos=1).read_text()
     more = len(report["newly_failing"]) - 1
     assert f"{more} more not shown as clips" in page
 
@@ -217,7 +218,7 @@ def test_both_clips_of_a_pair_show_the_same_seconds_of_the_scene(report_dir, rep
 
     assert gap(window[-1], whole[end]) < gap(window[-1], whole[-1])  # the moment of the failure, not the end
     assert gap(window[0], whole[end - 9]) < 3.0 and gap(window[-1], whole[end]) < 3.0
-    page = write_html(report, tmp_path / "r.html", render_videos=False).read_text()
+    page = write_html(RegressReport.from_json(report), tmp_path / "r.html", render_videos=False).read_text()
     pair = next(p for p in page.split('class="clip pair"')[1:] if f"<b>{episode['id']}</b>" in p)
     first = max(0, end - 35 + 1) / 5
     assert f"both from {first:.1f} s to {end / 5:.1f} s of the episode (the seconds up to the candidate" in pair
@@ -225,8 +226,8 @@ def test_both_clips_of_a_pair_show_the_same_seconds_of_the_scene(report_dir, rep
 
 @pytest.mark.slow
 def test_rendering_the_clips_shows_its_progress(report, report_dir, capsys):
-    write_html(report, report_dir / "progress.html", max_videos=1, progress=True)
+    write_html(RegressReport.from_json(report), report_dir / "progress.html", max_videos=1, progress=True)
     err = capsys.readouterr().err.replace("\r", "\n")
     assert "report clips: 100%" in err and "2/2" in err
-    write_html(report, report_dir / "quiet.html", max_videos=1)
+    write_html(RegressReport.from_json(report), report_dir / "quiet.html", max_videos=1)
     assert "report clips" not in capsys.readouterr().err

@@ -9,9 +9,10 @@ from pathlib import Path
 import pytest
 
 from dv2s_gym.regress.errors import ReportMismatchError
-from dv2s_gym.regress.report import (build_report, check_baseline_code, load_report, warnings, write_json,
+from dv2s_gym.regress.report import (check_baseline_code, load_report, warnings, write_json,
                                      write_markdown)
 from policies.run_identity import BUILT_IN, report_code_identity
+from regress_report_data import report_from_json
 from scenario_bank.atomic import file_sha256
 from tests import test_one_detector_path as plug_in
 from tests.test_one_detector_path import finds_no_collision, noop_collision  # noqa: F401 (a fixture)
@@ -28,9 +29,9 @@ def _report(kinds=KINDS, bank=None, scenario="s"):
               "error": None}
     episode = {"id": f"{scenario}/0", "scenario": scenario, "seed": 0, "candidate": {**result, "role": "candidate"},
                "baseline": {**result, "role": "baseline"}}
-    return build_report(bank=bank, settings={"episodes": 1, "seed": 0, "margin": 0.02, "alpha": 0.05,
+    return report_from_json(bank=bank, settings={"episodes": 1, "seed": 0, "margin": 0.02, "alpha": 0.05,
                                              "failure": list(kinds)},
-                        candidate={"spec": "a"}, baseline={"spec": "b"}, episodes=[episode])
+                            candidate={"spec": "a"}, baseline={"spec": "b"}, episodes=[episode])
 
 
 def test_a_report_records_who_judged_each_kind():

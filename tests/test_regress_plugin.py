@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from dv2s_gym.regress.assertions import RegressionFailed, RegressionReport
+from dv2s_gym.regress.records import RegressReport
 
 pytest_plugins = ["pytester"]
 
@@ -124,7 +125,7 @@ def test_failure_messages_from_a_report_dict(tmp_path):
             "scenarios": {"a": {"candidate": {"failure_rate": {"value": 0.3}},
                                 "baseline": {"failure_rate": {"value": 0.0}}, "comparison": comparison}},
             "overall": {"comparison": dict(comparison, reason="pooled: candidate fails more often")}}
-    report = RegressionReport(data, tmp_path)
+    report = RegressionReport(RegressReport.from_json(data), tmp_path)
     message = report.failure_message()
     assert message.splitlines()[0] == "dv2s regression FAIL: 'new' against 'old' regressed on a"
     assert "a: failure rate 30% vs 0%, difference +30.0 pp [+7.7 pp, +51.9 pp], p = 0.0156 (adjusted 0.0312)" in message
@@ -132,11 +133,12 @@ def test_failure_messages_from_a_report_dict(tmp_path):
     assert f"report: {tmp_path / 'report.md'}" in message
     with pytest.raises(RegressionFailed):
         report.assert_no_regression()
-    assert RegressionReport(dict(data, verdict="PASS"), tmp_path).assert_no_regression().verdict == "PASS"
-    inconclusive = RegressionReport(dict(data, verdict="INCONCLUSIVE", regressed=[]), tmp_path)
+    assert RegressionReport(RegressReport.from_json(dict(data, verdict="PASS")), tmp_path).assert_no_regression().verdict == "PASS"
+    inconclusive = RegressionReport(RegressReport.from_json(dict(data, verdict="INCONCLUSIVE", regressed=[])),
+                                    tmp_path)
     assert inconclusive.failure_message() is None
     assert "INCONCLUSIVE" in inconclusive.failure_message(allow_inconclusive=False)
-    assert "without a baseline" in RegressionReport(dict(data, verdict=None, baseline=None)).failure_message()
+    assert "without a baseline" in RegressionReport(RegressReport.from_json(dict(data, verdict=None, baseline=None))).failure_message()
 
 
 def test_the_arguments_of_a_check_are_the_regression_settings():

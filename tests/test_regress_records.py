@@ -12,7 +12,7 @@ import pytest
 
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.failures import apply_failure
-from dv2s_gym.regress.report import build_report
+from regress_report_data import report_from_json
 from dv2s_gym.regress.store import RunStore
 from scenario_bank.records import RecordError, RegressEpisode
 
@@ -78,8 +78,8 @@ def test_a_report_built_from_records_holds_the_same_json_as_one_built_from_their
     def report(make):
         episode = {"id": candidate["id"], "scenario": candidate["scenario"], "seed": candidate["seed"],
                    "candidate": make(candidate), "baseline": make(baseline)}
-        built = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
-                             episodes=[episode])
+        built = report_from_json(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
+                                 episodes=[episode])
         return json.dumps({k: v for k, v in built.to_dict().items() if k != "created"}, sort_keys=True)
 
     assert report(RegressEpisode.from_dict) == report(dict)

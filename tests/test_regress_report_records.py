@@ -16,7 +16,8 @@ import dv2s_gym.regress.report as report_module
 from dv2s_gym.regress.errors import ReportMismatchError
 from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, PairedEpisode, PolicyInfo,
                                       RegressReport, ReportSettings, ScenarioResult, SequentialOutcome, Summary)
-from dv2s_gym.regress.report import build_report, format_summary, load_report, write_json
+from dv2s_gym.regress.report import format_summary, load_report, write_json
+from regress_report_data import report_from_json
 from scenario_bank.records import RecordError, RegressEpisode
 
 RESULTS = Path(__file__).resolve().parent / "data" / "regress" / "results.jsonl"
@@ -42,10 +43,10 @@ def _report(*, baseline: bool = True, sequential=None) -> RegressReport:
     settings = {"episodes": 2, "seed": 0, "margin": 0.05, "alpha": 0.05, "sequential": sequential is not None,
                 "env_config": {}, "backend": "local", "workers": 1, "timeout": None,
                 "failure": ["collision", "off_road", "stall"], "stall_seconds": 5.0, "mde": 0.3, "power": 0.8}
-    return build_report(bank={"path": "bank", "version": "v", "scenarios": names, "hashes": {n: "h" for n in names}},
-                        settings=settings, candidate={"spec": "new", "card": None},
-                        baseline={"spec": "old", "card": None} if baseline else None, episodes=episodes,
-                        stopped_early=False, sequential=sequential)
+    return report_from_json(bank={"path": "bank", "version": "v", "scenarios": names, "hashes": {n: "h" for n in names}},
+                            settings=settings, candidate={"spec": "new", "card": None},
+                            baseline={"spec": "old", "card": None} if baseline else None, episodes=episodes,
+                            stopped_early=False, sequential=sequential)
 
 
 @pytest.mark.parametrize("baseline", [True, False], ids=["compared", "measures only"])
@@ -126,15 +127,15 @@ def test_the_consumers_read_a_record_and_its_json_alike():
     from dv2s_gym.loop import run as loop
 
     report = _report()
-    as_json = json.loads(json.dumps(report.to_json()))
-    assert format_summary(report) == format_summary(RegressReport.from_json(as_json))
+    read_back = RegressReport.from_json(json.loads(json.dumps(report.to_json())))
+    assert format_summary(report) == format_summary(read_back)
     assert loop._regress_summary(report, Path("r.json"), ["urban_pull_back_in"]) == \
-        loop._regress_summary(as_json, Path("r.json"), ["urban_pull_back_in"])
+        loop._regress_summary(read_back, Path("r.json"), ["urban_pull_back_in"])
     summary = loop._regress_summary(report, Path("r.json"), ["urban_pull_back_in"])
     assert summary.to_dict()["verdict"] == "ERROR" and summary.to_dict()["regressed"] == list(report.regressed)
     assert summary.to_dict()["new_failure_rate"] == report.overall.candidate.failure_rate
     roles = {"baseline": "start", "candidate": "fine_tuned"}
-    assert loop._regress_errored(report, roles) == loop._regress_errored(as_json, roles)
+    assert loop._regress_errored(report, roles) == loop._regress_errored(read_back, roles)
 
 
 def test_the_report_format_documented_in_the_module_is_the_version_written():

@@ -69,7 +69,7 @@ import os
 import re
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 from dv2s_gym.mining import miner
 
@@ -423,7 +423,7 @@ def _mining_summary(mine_out: Path) -> MiningSummary:
                          clusters_reference_failed=reference_failed)
 
 
-def _regress_errored(report: Union[RegressReport, Mapping[str, Any]], roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
+def _regress_errored(report: RegressReport, roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
     """The errored episodes of a ``dv2s regress`` report (a :class:`~dv2s_gym.regress.records.RegressReport`) per
     policy: ``roles`` maps its roles (``candidate``, ``baseline``) to the loop's names for them
     (:func:`errored_episodes`' form)."""
@@ -461,7 +461,7 @@ def _policy_env_config(spec: str) -> Dict[str, Any]:
     return dict(card.env_config or {})
 
 
-def _regress_summary(report: Union[RegressReport, Mapping[str, Any]], path: Path, parents: Sequence[str] = ()) -> RegressSummary:
+def _regress_summary(report: RegressReport, path: Path, parents: Sequence[str] = ()) -> RegressSummary:
     """The regression step's record; ``parents``: scenarios whose own results are kept apart (the held-out
     families' parents, never fine-tuned on: the regression test's view beyond the fine-tuning mix)."""
     report = RegressReport.from_json(report)

@@ -50,10 +50,9 @@ class RegressionReport(Mapping[str, Any]):
         out_dir: the run's folder (``report.json``, ``report.md``, ``report.html``, traces).
     """
 
-    def __init__(self, data: Union[RegressReport, Mapping[str, Any]],
-                 out_dir: Union[str, os.PathLike, None] = None) -> None:
-        self.data: Dict[str, Any] = data.to_dict() if isinstance(data, RegressReport) else dict(data)
-        self.report = RegressReport.from_json(data)
+    def __init__(self, data: RegressReport, out_dir: Union[str, os.PathLike, None] = None) -> None:
+        self.data: Dict[str, Any] = data.to_dict()
+        self.report = data
         self.out_dir = None if out_dir is None else Path(out_dir)
 
     # Mapping interface: report["scenarios"], report.get("errors"), ...

@@ -466,13 +466,13 @@ def render_html(report: RegressReport, *, base: Union[str, os.PathLike] = ".",
     return "\n".join(parts)
 
 
-def write_html(report: Union[RegressReport, Mapping[str, Any]], path: Union[str, os.PathLike], *,
+def write_html(report: RegressReport, path: Union[str, os.PathLike], *,
                videos: Optional[Mapping[str, VideoSource]] = None, render_videos: bool = True,
                max_videos: int = MAX_VIDEOS, progress: bool = False) -> Path:
     """Write the report as one self-contained HTML file at ``path`` (atomically); returns the path.
 
     Args:
-        report: a ``dv2s-regress`` report (:class:`~dv2s_gym.regress.records.RegressReport` or its JSON object).
+        report: a ``dv2s-regress`` report (:class:`~dv2s_gym.regress.records.RegressReport`).
         path: the ``.html`` file to write; relative trace paths in the report resolve against its folder.
         videos: clips to embed, by episode id (``"<scenario>/<seed>"``; ``"<scenario>/<seed>#baseline"`` for the
             baseline's run of the same scene): a ``.webm`` path or its bytes.
@@ -482,7 +482,7 @@ def write_html(report: Union[RegressReport, Mapping[str, Any]], path: Union[str,
         progress: a progress bar on stderr while the clips render (they take seconds each).
     """
     path = Path(path)
-    page = render_html(RegressReport.from_json(report), base=path.parent, videos=videos, render_videos=render_videos,
+    page = render_html(report, base=path.parent, videos=videos, render_videos=render_videos,
                        max_videos=max_videos, progress=progress)
     path.parent.mkdir(parents=True, exist_ok=True)
     return atomic_write_text(path, page)

@@ -275,33 +275,29 @@ def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLik
                     scenarios=tuple(scenarios), hashes=hashes)
 
 
-def build_report(*, bank: Union[BankInfo, Mapping[str, Any]], settings: Union[ReportSettings, Mapping[str, Any]],
-                 candidate: Union[PolicyInfo, Mapping[str, Any]], baseline: Union[None, PolicyInfo, Mapping[str, Any]],
-                 episodes: Sequence[Union[PairedEpisode, Mapping[str, Any]]], stopped_early: bool = False,
-                 sequential: Union[None, SequentialOutcome, Mapping[str, Any]] = None,
+def build_report(*, bank: BankInfo, settings: ReportSettings, candidate: PolicyInfo, baseline: Optional[PolicyInfo],
+                 episodes: Sequence[PairedEpisode], stopped_early: bool = False,
+                 sequential: Optional[SequentialOutcome] = None,
                  code_identity: Optional[Mapping[str, Any]] = None) -> RegressReport:
     """The report (schema in the module docstring) from the paired episodes.
 
     Args:
-        bank: a :class:`~dv2s_gym.regress.records.BankInfo` (or its JSON object).
+        bank: the bank's :class:`~dv2s_gym.regress.records.BankInfo`.
         settings: the run's :class:`~dv2s_gym.regress.records.ReportSettings` (``margin`` and ``alpha`` decide the
-            verdicts), or its JSON object.
-        candidate / baseline: :class:`~dv2s_gym.regress.records.PolicyInfo` (or ``{"spec", "card", ...}``);
-            ``baseline`` None for a run without one.
-        episodes: :class:`~dv2s_gym.regress.records.PairedEpisode` (or ``{"id", "scenario", "seed", "candidate":
-            result, "baseline": result | None}``), each result a :class:`~scenario_bank.records.RegressEpisode` or its
-            JSON object.
+            verdicts).
+        candidate / baseline: :class:`~dv2s_gym.regress.records.PolicyInfo`; ``baseline`` None for a run without
+            one.
+        episodes: :class:`~dv2s_gym.regress.records.PairedEpisode`, each result a
+            :class:`~scenario_bank.records.RegressEpisode`.
         stopped_early / sequential: the sequential test's outcome (a
-            :class:`~dv2s_gym.regress.records.SequentialOutcome` or its JSON object; its ``verdict``, when set, is the
-            overall verdict of a sequential run; a scenario FAIL still FAILs).
+            :class:`~dv2s_gym.regress.records.SequentialOutcome`; its ``verdict``, when set, is the overall verdict of
+            a sequential run; a scenario FAIL still FAILs).
         code_identity: the code that judged the episodes
             (:func:`policies.run_identity.report_code_identity`); default: this process's, for the run's failure
             kinds.
     """
-    bank, settings = BankInfo.from_dict(bank), ReportSettings.from_dict(settings)
-    sequential = SequentialOutcome.from_dict(sequential) if sequential is not None else None
     scenarios = list(bank.scenarios or ())
-    paired = sorted(map(PairedEpisode.from_dict, episodes), key=lambda e: (
+    paired = sorted(episodes, key=lambda e: (
         scenarios.index(e.scenario) if e.scenario in scenarios else len(scenarios), e.scenario, int(e.seed)))
     has_baseline = baseline is not None
     by_scenario: Dict[str, List[PairedEpisode]] = {name: [] for name in scenarios}
@@ -330,8 +326,8 @@ def build_report(*, bank: Union[BankInfo, Mapping[str, Any]], settings: Union[Re
         created=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         dv2s_version=installed_version(),
         code_identity=dict(code_identity) if code_identity is not None else report_code_identity(
-            settings.failure or ()), bank=bank, settings=settings, candidate=PolicyInfo.from_dict(candidate),
-        baseline=PolicyInfo.from_dict(baseline) if has_baseline else None, episodes=tuple(paired),
+            settings.failure or ()), bank=bank, settings=settings, candidate=candidate,
+        baseline=baseline if has_baseline else None, episodes=tuple(paired),
         scenarios=report_scenarios, overall=overall, verdict=verdict, regressed=tuple(compared.regressed),
         newly_failing=tuple(compared.newly_failing), errors=tuple(errors), stopped_early=bool(stopped_early),
         sequential=sequential, power=compared.power, aggregates=compared.aggregates, error_reason=error_reason)

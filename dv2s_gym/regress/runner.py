@@ -60,7 +60,8 @@ from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.records import JsonRecord, RecordError, RegressEpisode, recorded
 from scenario_bank.run_identity import BANK_IDENTITY
-from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, PowerPlan, RegressReport, SequentialOutcome
+from dv2s_gym.regress.records import (BankInfo, PairedEpisode, PolicyInfo, PowerPlan, RegressReport, ReportSettings,
+                                      SequentialOutcome)
 from policies.card_record import ModelCard
 from policies.registry import PolicySpaceError, load_policy
 
@@ -260,8 +261,8 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
         report_settings["plan"] = plan.plan
     report_settings["mde"] = float(settings.mde if settings.mde is not None else power_plan.DEFAULT_MDE)
     report_settings["power"] = float(settings.power if settings.power is not None else power_plan.DEFAULT_POWER)
-    report = build_report(bank=plan.bank, settings=report_settings, candidate=plan.candidate_info,
-                          baseline=plan.baseline_info, episodes=episodes.paired(ran.seeds),
+    report = build_report(bank=plan.bank, settings=ReportSettings.from_dict(report_settings),
+                          candidate=plan.candidate_info, baseline=plan.baseline_info, episodes=episodes.paired(ran.seeds),
                           stopped_early=ran.stopped_early, sequential=ran.sequential, code_identity=plan.judged_by)
     report = report.replace(hostname=socket.gethostname(),
                             timing={name: round(value, 3) for name, value in episodes.timing.items()},

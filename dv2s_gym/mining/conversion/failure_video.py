@@ -214,7 +214,7 @@ class _LastObservation(gym.Wrapper):
         return result
 
 
-def rerun_failure(record: Union[EpisodeRecord, Mapping[str, Any]], *, policy: Any,
+def rerun_failure(record: EpisodeRecord, *, policy: Any,
                   bank_dir: Optional[PathLike] = None, env_config: Optional[Mapping[str, Any]] = None, render: bool = False,
                   extra_steps: int = 0, camera: Optional[Mapping[str, Any]] = None) -> Tuple[Any, Any, List[np.ndarray]]:
     """Re-run an episode record with ``policy`` (a spec or a :class:`~policies.registry.Policy`).

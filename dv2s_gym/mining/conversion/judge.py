@@ -6,7 +6,7 @@ least :data:`COMPARED_SHARE` of them compared).
 
 from __future__ import annotations
 
-from typing import Any, List, Mapping, Optional, Union
+from typing import Any, List, Mapping, Optional
 
 from dv2s_gym.mining.conversion.interaction import FailureInteraction
 from dv2s_gym.mining.conversion.ranges import exact_number
@@ -43,7 +43,7 @@ _KEY_REJECTIONS = (
 conversion, each with what is wrong, in the order the rejection reasons list them."""
 
 
-def judge_conversion(out: Mapping[str, Any], interaction: Union[FailureInteraction, Mapping[str, Any]],
+def judge_conversion(out: Mapping[str, Any], interaction: FailureInteraction,
                      source_failure: Failure, threshold: float) -> List[ConversionRejected]:
     """The checks a converted script must pass, each failing one a rejection with its own stage:
     ``interaction`` (its runs show the failure's actor doing its manoeuvre), ``reproduction`` (the policy
@@ -54,7 +54,6 @@ def judge_conversion(out: Mapping[str, Any], interaction: Union[FailureInteracti
     failure's parameters contain the failing values; ``out["parameters"]``,
     :func:`~dv2s_gym.mining.conversion.parameters.compare_parameters`)."""
     found: List[ConversionRejected] = []
-    interaction = FailureInteraction.from_dict(interaction)
     repro = out["reproduction"]
     k = repro["k"]
     what = f"{interaction.kind} ({', '.join(interaction.manoeuvres or ()) or 'no manoeuvre'})"
