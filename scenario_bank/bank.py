@@ -720,12 +720,11 @@ class EntryBatch:
                           if staged == digest), None)
         return found
 
-    def stage(self, script: str, meta: Union[Mapping[str, Any], Sidecar],
-              files: Optional[Mapping[str, PathLike]] = None) -> str:
+    def stage(self, script: str, meta: Sidecar, files: Optional[Mapping[str, PathLike]] = None) -> str:
         """Stage a verified entry (its sidecar ``meta``, the ``files`` it carries, already listed in its
         provenance) under its name, or the next free one (``_2``, ...; ``_i`` appended while another staged entry
         has it); returns the name. The entry enters the bank when the :meth:`Bank.add_together` block ends."""
-        meta = meta.to_dict() if isinstance(meta, Sidecar) else dict(meta)
+        meta = meta.to_dict()
         name = self.bank._free_name(meta["name"], explicit=False)
         while name in self.names:
             name = f"{name}_i"

@@ -36,7 +36,7 @@ ego = new Car at lane.centerline.pointAlongBy(egoS),
 PARENT = HEAD.format(params="param lead_gap = Range(10, 150)", before="",
                      placement="ahead of ego by globalParameters.lead_gap")
 FAILING = {"ego_speed": 25.0, "lead_gap": 110.0}
-INTERACTION = {"kind": "car", "actor": "slow", "manoeuvres": []}
+INTERACTION = FailureInteraction(kind="car", actor="slow", manoeuvres=())
 REPRODUCED = {"k": 10, "reproduced": 10, "rate": 1.0, "interaction_shown": 10}
 
 
@@ -48,7 +48,7 @@ def judged(new_script: str, parent: str = PARENT, failing=None):
     """The parameter comparison and the judge's rejections of ``new_script`` as a conversion of the failure."""
     parameters = compare_parameters(failing or FAILING, new_script, parent, INTERACTION)
     rejections = judge_conversion({"reproduction": REPRODUCED, "parameters": parameters},
-                                  FailureInteraction.from_dict(INTERACTION), {"type": "collision", "with_kind": "car"}, 0.3)
+                                  INTERACTION, {"type": "collision", "with_kind": "car"}, 0.3)
     return parameters, [str(r) for r in rejections]
 
 

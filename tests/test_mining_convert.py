@@ -1355,7 +1355,7 @@ def test_a_key_quantity_the_new_script_fixes_without_a_parameter_must_hold_the_f
     from dv2s_gym.mining.conversion.parameters import compare_parameters
 
     generated = _key_script(fixed).replace("param g = Range(5, 11)\n", "")
-    compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction={"actor": "merger"})
+    compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction=FailureInteraction(actor="merger"))
     assert "gap" in compared["not_comparable"] and compared["key_not_compared"] == {}
     reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, FailureInteraction(), {"type": "collision"}, 0.3)]
     if holds:
@@ -1413,7 +1413,7 @@ def test_a_fixed_key_value_holds_the_failing_value_within_the_replay_narrowing_o
 
     assert FIXED_TOLERANCE == NARROW == 0.02
     generated = _key_script(fixed).replace("param g = Range(5, 11)\n", "")
-    compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction={"actor": "merger"})
+    compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction=FailureInteraction(actor="merger"))
     reasons = [str(r) for r in judge_conversion({**_PASSING, "parameters": compared}, FailureInteraction(), {"type": "collision"}, 0.3)]
     assert (reasons == []) is holds
     assert (compared["key_fixed_outside"] == {}) is holds
@@ -1573,7 +1573,7 @@ def test_a_product_that_uses_a_sampled_value_twice_is_not_read_jointly():
                  .replace("pointAlongBy(-globalParameters.ego_distance)",
                           "pointAlongBy(-(globalParameters.ego_speed * (globalParameters.lead + globalParameters.lead)))"))
     compared = compare_parameters(_JUNCTION_FAILING, generated, parent=_JUNCTION_PARENT,
-                                  interaction={"actor": "bus", "kind": "bus"})
+                                  interaction=FailureInteraction(actor="bus", kind="bus"))
     assert list(compared["key_not_compared"]) == ["ego_distance"]
 
 

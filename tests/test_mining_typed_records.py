@@ -552,31 +552,60 @@ def failure_key_reads(source: str) -> List[str]:
             if ast.unparse(target).split(".")[-1] in _HOLDERS and key in _FAILURE_KEYS]
 
 
-def _is_result(target: ast.expr, aliases: typing.AbstractSet[str]) -> bool:
-    """Whether ``target`` is an episode record's result: ``<x>.result``, or a name bound to one."""
-    return (isinstance(target, ast.Attribute) and target.attr == "result") or (
+def _is_held(target: ast.expr, attribute: str, aliases: typing.AbstractSet[str]) -> bool:
+    """Whether ``target`` is an episode record's ``attribute`` (``<x>.result``, ``<x>.reference``), or a name bound
+    to one."""
+    return (isinstance(target, ast.Attribute) and target.attr == attribute) or (
         isinstance(target, ast.Name) and target.id in aliases)
 
 
-def result_key_reads(source: str) -> List[str]:
-    """The string-key reads of an episode result's JSON keys (:class:`~scenario_bank.records.EpisodeOutcome`) in
-    ``source``: of ``<x>.result`` (``record.result["trajectory_hash"]``, ``(record.result or {}).get("steps")``) and
-    of a name a function binds to one (``result = record.result or {}`` then ``result.get("params")``)."""
-    from scenario_bank.records import EpisodeOutcome
+def _outcome_record(attribute: str) -> type:
+    """The record an episode record's ``attribute`` holds: ``result`` an
+    :class:`~scenario_bank.records.EpisodeOutcome`, ``reference`` a :class:`~scenario_bank.records.ReferenceOutcome`."""
+    from scenario_bank.records import EpisodeOutcome, ReferenceOutcome
 
-    keys, tree, found = EpisodeOutcome.json_fields(), ast.parse(source), {}
+    return {"result": EpisodeOutcome, "reference": ReferenceOutcome}[attribute]
+
+
+def outcome_key_reads(source: str, attribute: str) -> List[str]:
+    """The string-key reads of the JSON keys of an episode record's ``attribute`` (``result`` or ``reference``,
+    :func:`_outcome_record`) in ``source``: of ``<x>.result`` (``record.result["trajectory_hash"]``, ``(record.result
+    or {}).get("steps")``) and of a name a function binds to one (``result = record.result or {}`` then
+    ``result.get("params")``)."""
+    keys, tree, found = _outcome_record(attribute).json_fields(), ast.parse(source), {}
     scopes = [(tree, frozenset())]
     for function in ast.walk(tree):
         if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef)):
             aliases = {t.id for node in ast.walk(function) if isinstance(node, ast.Assign)
-                       and _is_result(_unwrapped(node.value), frozenset())
+                       and _is_held(_unwrapped(node.value), attribute, frozenset())
                        for t in node.targets if isinstance(t, ast.Name)}
             scopes.append((function, frozenset(aliases)))
     for scope, aliases in scopes:
         for node, target, key in _key_reads(scope):
-            if key in keys and _is_result(target, aliases):
+            if key in keys and _is_held(target, attribute, aliases):
                 found[(node.lineno, node.col_offset)] = ast.unparse(node)
     return [found[where] for where in sorted(found)]
+
+
+def result_key_reads(source: str) -> List[str]:
+    """:func:`outcome_key_reads` of episode results (:class:`~scenario_bank.records.EpisodeOutcome`)."""
+    return outcome_key_reads(source, "result")
+
+
+def reference_key_reads(source: str) -> List[str]:
+    """:func:`outcome_key_reads` of the reference driver's outcomes (:class:`~scenario_bank.records.ReferenceOutcome`)."""
+    return outcome_key_reads(source, "reference")
+
+
+def _product_reads(reads: typing.Callable[[str], List[str]]) -> Dict[str, List[str]]:
+    """``{module path: reads}`` of every product module where ``reads`` finds any."""
+    found = {}
+    for folder in ("dv2s_gym", "policies", "envs", "scenario_bank"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            found_here = reads(path.read_text(encoding="utf-8"))
+            if found_here:
+                found[path.relative_to(ROOT).as_posix()] = found_here
+    return found
 
 
 def test_the_failure_read_check_sees_a_failure_read_by_key():
@@ -629,13 +658,32 @@ def test_the_result_read_check_sees_a_result_read_by_key():
 def test_the_product_reads_episode_results_by_their_fields():
     """An episode record's result (and a held-out episode's) is a record: no product module reads one by a JSON
     key."""
-    found = {}
-    for folder in ("dv2s_gym", "policies", "envs", "scenario_bank"):
-        for path in sorted((ROOT / folder).rglob("*.py")):
-            reads = result_key_reads(path.read_text(encoding="utf-8"))
-            if reads:
-                found[path.relative_to(ROOT).as_posix()] = reads
+    found = _product_reads(result_key_reads)
     assert not found, f"{found} read an episode result by key: read the record's fields (result.trajectory_hash)"
+
+
+def test_the_reference_read_check_sees_a_reference_read_by_key():
+    planted = textwrap.dedent("""
+        def run(record, entry, settings):
+            reference = record.reference or {}
+            policy = reference.get("policy")
+            return (record.reference["failure"], (entry.reference or {}).get("trajectory_hash"), policy,
+                    dict(record.reference or {}).get("collided"), record.reference.failure,
+                    record.reference.get("kept"), settings["failure"], record.result.get("policy"))
+
+        def other(reference):
+            return reference["failure"], reference.get("policy")
+    """)
+    assert reference_key_reads(planted) == ["reference.get('policy')", "record.reference['failure']",
+                                            "(entry.reference or {}).get('trajectory_hash')",
+                                            "dict(record.reference or {}).get('collided')"]
+
+
+def test_the_product_reads_the_reference_driver_s_outcome_by_its_fields():
+    """An episode record's reference (the reference driver's outcome, and a mining report's failure entry's) is a
+    :class:`~scenario_bank.records.ReferenceOutcome`: no product module reads one by a JSON key."""
+    found = _product_reads(reference_key_reads)
+    assert not found, f"{found} read a reference outcome by key: read the record's fields (reference.failure)"
 
 
 _RESULT_KEYS = ["scenario", "seed", "scene_seed", "params", "collided", "collisions", "off_road", "success", "min_ttc",
@@ -781,3 +829,136 @@ def test_a_failure_and_behaviour_keep_what_their_json_held():
         EpisodeRecord.from_dict({**episode, "failure": {"kind": "collision"}})
     with pytest.raises(RecordError, match="'failure.step' must be an integer"):
         EpisodeRecord.from_dict({**episode, "failure": {"type": "collision", "step": "ten"}})
+
+
+_PRODUCT = ("dv2s_gym", "policies", "envs", "scenario_bank")
+"""The product's packages."""
+_READERS = ("from_dict", "from_json", "from_checked", "of")
+"""The readers whose job is to read a record's JSON object (or take the record as it is)."""
+RECORD_OR_MAPPING_ALLOWED: Dict[str, str] = {
+    "dv2s_gym/mining/conversion/failure_video.py:record_failure_video(record_or_trace)":
+        "a user's entry point: it also takes a line of episodes.jsonl as read from the file, and names the fields "
+        "it lacks",
+    "dv2s_gym/mining/conversion/failure_video.py:write_failure_video(record_or_trace)":
+        "a user's entry point: it also takes a line of episodes.jsonl as read from the file, and names the fields "
+        "it lacks",
+    "dv2s_gym/mining/jsonl.py:JsonlAppender.append(record)":
+        "the exact replays' rows it writes are JSON objects (replay_failure_entry), beside records",
+    "scenario_bank/entries.py:new_sidecar(provenance)":
+        "takes the provenance a Scenic 2 upgrade returns as a JSON object (admission.upgrade_if_asked)",
+    "scenario_bank/entries.py:new_provenance(provenance)":
+        "takes the provenance a Scenic 2 upgrade returns as a JSON object (admission.upgrade_if_asked)",
+    "scenario_bank/entries.py:new_sidecar(elements)":
+        "takes the elements of the Sidecar given to Bank.add, which holds them as its caller built it (a Sidecar "
+        "does not read its fields when constructed)",
+    "scenario_bank/elements.py:element_set(data)":
+        "reads the elements the description metrics are given (pipeline.metrics.ElementsLike): a record or its "
+        "JSON object",
+    "dv2s_gym/loop/verdict.py:heldout_worse(tables)":
+        "its PairedTable is the statistics' table (dv2s_gym.regress.stats), no record: the check goes by name",
+}
+"""``"<module path>:<function>(<parameter>)"`` of the public product functions that still take a record or its JSON
+object, each with the reason."""
+
+
+def record_classes(sources: typing.Iterable[str]) -> typing.FrozenSet[str]:
+    """The names of the record classes in ``sources``: :class:`~scenario_bank.records.JsonRecord`, every class
+    deriving from a record class, and :class:`~scenario_bank.elements.Elements` (a record of its own kind)."""
+    bases: Dict[str, List[str]] = {}
+    for source in sources:
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, ast.ClassDef):
+                bases.setdefault(node.name, []).extend(ast.unparse(b).split("[")[0].split(".")[-1] for b in node.bases)
+    records, grown = {"JsonRecord", "Elements"}, True
+    while grown:
+        found = {name for name, parents in bases.items() if set(parents) & records} - records
+        records |= found
+        grown = bool(found)
+    return frozenset(records)
+
+
+def _union_members(node: ast.expr) -> List[ast.expr]:
+    """The members of a union annotation (``Union[A, B]``, ``Optional[A]``, ``A | B``), or ``[]``."""
+    if isinstance(node, ast.BinOp) and isinstance(node.op, ast.BitOr):
+        return _union_members(node.left) or [node.left] + (_union_members(node.right) or [node.right])
+    if isinstance(node, ast.Subscript) and ast.unparse(node.value).split(".")[-1] == "Union":
+        return list(node.slice.elts) if isinstance(node.slice, ast.Tuple) else [node.slice]
+    return []
+
+
+def _type_name(node: ast.expr) -> str:
+    """``Name`` of ``Name``, ``"Name"``, ``module.Name`` and ``Name[...]``."""
+    text = node.value if isinstance(node, ast.Constant) and isinstance(node.value, str) else ast.unparse(node)
+    return text.strip("'\"").split("[")[0].split(".")[-1]
+
+
+def record_or_mapping_parameters(source: str, records: typing.AbstractSet[str]) -> List[str]:
+    """``"<function>(<parameter>)"`` of the public functions and methods (``__init__`` of a public class too) in
+    ``source`` that take a parameter annotated with a union of a record class of ``records`` and a JSON object
+    (``Union[Record, Mapping[str, Any]]``, ``Record | dict``, anywhere in the annotation); the readers
+    (:data:`_READERS`) excepted."""
+    tree, found = ast.parse(source), []
+    functions = [(node.name, node) for node in tree.body if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    functions += [(f"{cls.name}.{item.name}", item) for cls in tree.body
+                  if isinstance(cls, ast.ClassDef) and not cls.name.startswith("_")
+                  for item in cls.body if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    for name, node in functions:
+        short = name.split(".")[-1]
+        if (short.startswith("_") and short != "__init__") or short in _READERS:
+            continue
+        arguments = node.args.posonlyargs + node.args.args + node.args.kwonlyargs
+        for argument in arguments:
+            unions = [_union_members(part) for part in ast.walk(argument.annotation)] if argument.annotation else []
+            if any({_type_name(m) for m in members} & records
+                   and {_type_name(m) for m in members} & {"Mapping", "Dict", "dict", "MutableMapping"}
+                   for members in unions):
+                found.append(f"{name}({argument.arg})")
+    return found
+
+
+def _product_sources() -> Dict[str, str]:
+    return {path.relative_to(ROOT).as_posix(): path.read_text(encoding="utf-8")
+            for folder in _PRODUCT for path in sorted((ROOT / folder).rglob("*.py"))}
+
+
+def test_the_union_check_sees_a_record_or_its_json_object_taken():
+    planted = textwrap.dedent("""
+        from typing import Any, Dict, Mapping, Optional, Sequence, Union
+
+        class Outcome(JsonRecord): ...
+        class Finer(Outcome): ...
+
+        def takes(report: Union[Outcome, Mapping[str, Any]], n: int) -> None: ...
+        def optional(report: Union[None, "Finer", Dict[str, Any]] = None) -> None: ...
+        def nested(*, episodes: Sequence[Union[Finer, Mapping[str, Any]]]) -> None: ...
+        def piped(report: Outcome | dict) -> None: ...
+        def record_only(report: Outcome, other: Optional[Mapping[str, Any]]) -> None: ...
+        def not_a_record(settings: Union[MonitorSettings, Mapping[str, Any]]) -> None: ...
+        def _private(report: Union[Outcome, Mapping[str, Any]]) -> None: ...
+
+        class Reader:
+            def __init__(self, data: Union[Outcome, Mapping[str, Any]]) -> None: ...
+            @classmethod
+            def from_dict(cls, data: Union[Outcome, Mapping[str, Any]]) -> "Reader": ...
+    """)
+    records = record_classes([planted])
+    assert {"Outcome", "Finer"} <= records and "Reader" not in records
+    assert record_or_mapping_parameters(planted, records) == [
+        "takes(report)", "optional(report)", "nested(episodes)", "piped(report)", "Reader.__init__(data)"]
+
+
+def test_no_public_product_function_takes_a_record_or_its_json_object():
+    """The product's public functions take the records the product passes them, not a record or its JSON object
+    (a misspelt key of such an object would be kept in ``extra`` silently); :data:`RECORD_OR_MAPPING_ALLOWED` lists
+    the ones whose callers hand them JSON objects, each with the reason."""
+    sources = _product_sources()
+    records = record_classes(sources.values())
+    assert {"JsonRecord", "EpisodeRecord", "RegressReport", "LoopReportBody", "TrainRun", "FailureInteraction",
+            "ReferenceOutcome", "Elements"} <= records
+    found = [f"{path}:{name}" for path, source in sources.items()
+             for name in record_or_mapping_parameters(source, records)]
+    unlisted = [name for name in found if name not in RECORD_OR_MAPPING_ALLOWED]
+    assert not unlisted, (f"{unlisted} take a record or its JSON object: take the record (the callers read a JSON "
+                          "object with the record's from_dict), or list it in RECORD_OR_MAPPING_ALLOWED with the reason")
+    stale = sorted(set(RECORD_OR_MAPPING_ALLOWED) - set(found))
+    assert not stale, f"{stale} no longer take a record or its JSON object: remove them from RECORD_OR_MAPPING_ALLOWED"

@@ -128,7 +128,7 @@ def video_settings(settings: ConversionSettings) -> VideoSettings:
 
 def reproduce(script_path: Path, policy: Any, settings: ConversionSettings, record_seed: int,
               source_failure: Failure,
-              interaction: Union[FailureInteraction, Mapping[str, Any], None] = None
+              interaction: Optional[FailureInteraction] = None
               ) -> Tuple[List[Dict[str, Any]], List[Any]]:
     """Run ``policy`` on the new scenario over the settings' ``k`` seeds derived from ``record_seed`` (with the
     settings' ``env_config`` and ``monitor``); per episode its seed, failure, the kind of
@@ -137,7 +137,6 @@ def reproduce(script_path: Path, policy: Any, settings: ConversionSettings, reco
     the same kind of actor."""
     from envs.dv2s_env import DV2SEnv
 
-    interaction = FailureInteraction.from_dict(interaction) if interaction is not None else None
     env = DV2SEnv(scenario=str(script_path), config=dict(settings.env_config or {}))
     try:
         bound = load_policy(policy)

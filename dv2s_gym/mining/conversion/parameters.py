@@ -25,7 +25,7 @@ PathLike = Union[str, os.PathLike]
 
 
 def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional[str] = None,
-                       interaction: Union[FailureInteraction, Mapping[str, Any], None] = None) -> Dict[str, Any]:
+                       interaction: Optional[FailureInteraction] = None) -> Dict[str, Any]:
     """The failing parameter values against the ranges of the new script's global parameters that mean the same:
     first by name, without regard to case (``param x = Range(a, b)`` and the other numeric forms
     :func:`scenario_bank.dedup.param_ranges` reads), then, given the ``parent`` script the failure ran, by meaning
@@ -83,7 +83,7 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     why = {name: "the new script defines no numeric parameter of that name" for name in absent}
     keyed: Dict[str, List[Tuple[str, str, str, str]]] = {}
     if parent is not None:
-        interaction = FailureInteraction.from_dict(interaction) if interaction is not None else FailureInteraction()
+        interaction = interaction if interaction is not None else FailureInteraction()
         keyed = {name: where for name, where in key_uses(parent, interaction.kind,
                                                          interaction.actor).items() if name in numeric}
         meanings = {name: {(obj == "ego", kind, slot) for obj, kind, slot, _ in where} for name, where in keyed.items()}
