@@ -11,7 +11,8 @@ each a :class:`MinedEntry`), ``split`` (:class:`SplitRecord`), ``reference`` (:c
 (:class:`HeldOutBefore`), ``fine_tune`` and ``control`` (:class:`FineTuneArm`), ``untouched``
 (:class:`UntouchedComparison`, its comparisons :class:`RegressComparison`) and ``regress``
 (:class:`RegressSummary`). Maps keyed by scenario, policy or status (counts, errored episodes, per-scenario rows)
-stay JSON objects inside them.
+stay JSON objects inside them. The body of ``report.json`` (the settings, the rounds, the recommendation and the
+cross-round check), which the Markdown and HTML reports are rendered from, is a :class:`LoopReportBody`.
 
 Each is a :class:`~scenario_bank.records.JsonRecord`: :meth:`from_dict` reads the JSON object (a
 :class:`~scenario_bank.records.RecordError` names a field of the wrong kind, ``round.steps.after.pairs``),
