@@ -242,7 +242,7 @@ def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_pat
     row = page.split(f'<video src="bank/{out["bank_entry"]}/failure.webm"')[1].split("</div>")[0]
     assert f'<video src="bank/{out["bank_entry"]}/converted.webm"' in row and f"seed {seed}: it failed" in row
     assert "it has no converted script, so only the failure clip is shown" in page
-    gone = {**loop, "settings": {**loop["settings"], "bank_dir": str(tmp_path / "no_bank")}}  # the mining run's copies
+    gone = loop.replace(settings=loop.settings.replace(bank_dir=str(tmp_path / "no_bank")))  # the mining run's copies
     from_run = round_clips(gone, tmp_path)[1][f"{out['bank_entry']} (fine-tuned on)"]
     assert [c["path"] for c in from_run] == [f"run/failures/{SCENARIO}__collision__0/failure.webm",
                                              f"run/failures/{SCENARIO}__collision__0/conversion/converted.webm"]
