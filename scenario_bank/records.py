@@ -44,7 +44,8 @@ from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_r
 from scenario_bank.story import StoryError, normalize_story
 
 __all__ = ["RecordError", "JsonRecord", "recorded", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode",
-           "HeldOutEpisode", "Failure", "Behaviour", "EpisodeOutcome", "ReferenceOutcome", "UNKNOWN_PART", "BEHAVIOUR_PARTS",
+           "HeldOutEpisode", "Failure", "Behaviour", "EpisodeOutcome", "ReferenceOutcome", "UNKNOWN_PART",
+           "BEHAVIOUR_PARTS",
            "SOURCE_KINDS", "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES",
            "SIDECAR_VERSION", "SCRIPT", "SIDECAR", "CONTROL_FIX", "control_character_field", "is_entry_file"]
 
@@ -796,9 +797,10 @@ class EpisodeRecord(JsonRecord):
     ``seed`` and the script's sampled ``params``; the ``policy`` run on it and its ``result`` (an
     :class:`EpisodeOutcome`: :meth:`policies.evaluation.EpisodeResult.to_json`), its ``failure`` (``type``,
     ``kind``, ``time``, ...; ``None`` when it drove safely), robustness ``rho``, the reference driver's outcome on
-    the same scene (``reference``, a :class:`ReferenceOutcome`, and ``avoidable``), the saved ``trace`` of a failed episode (relative to the run
-    folder), ``error`` (the episode could not run: no failure of the policy), a failure's ``behaviour`` (who else was
-    involved and what each side was doing) and ``failure_state`` (the numbers describing the scene at the failure),
+    the same scene (``reference``, a :class:`ReferenceOutcome`, and ``avoidable``), the saved ``trace`` of a failed
+    episode (relative to the run folder), ``error`` (the episode could not run: no failure of the policy), a
+    failure's ``behaviour`` (who else was involved and what each side was doing) and ``failure_state`` (the numbers
+    describing the scene at the failure),
     the ``worker_restarts`` it survived, and the ``sampler`` with the ``point`` and ``proposal`` density it was drawn
     from. Other keys are kept in ``extra``.
 

@@ -262,7 +262,8 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     report_settings["mde"] = float(settings.mde if settings.mde is not None else power_plan.DEFAULT_MDE)
     report_settings["power"] = float(settings.power if settings.power is not None else power_plan.DEFAULT_POWER)
     report = build_report(bank=plan.bank, settings=ReportSettings.from_dict(report_settings),
-                          candidate=plan.candidate_info, baseline=plan.baseline_info, episodes=episodes.paired(ran.seeds),
+                          candidate=plan.candidate_info, baseline=plan.baseline_info,
+                          episodes=episodes.paired(ran.seeds),
                           stopped_early=ran.stopped_early, sequential=ran.sequential, code_identity=plan.judged_by)
     report = report.replace(hostname=socket.gethostname(),
                             timing={name: round(value, 3) for name, value in episodes.timing.items()},
