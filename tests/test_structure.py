@@ -2244,8 +2244,6 @@ STARTUP_FRONT: Dict[str, str] = {
                     "only when that command runs",
     "dv2s_gym.pipeline.stages": "the table of DRA and SG backends the command line's choices read: a backend's "
                                 "module is loaded when it is picked",
-    "dv2s_gym.regress.pytest_plugin": "pytest loads the plugin in every test run; the regression runner only "
-                                      "when a test asks for it",
     "dv2s_gym.workers.backends": "the table of worker backends the command line's --backend choices read: a "
                                  "backend's module is loaded when it is made",
 }
@@ -3225,8 +3223,6 @@ REACHED_BY_NAME = {
     # Scenic scripts written for CARLA call these actions by name (the CARLA facade's interface)
     "envs.scenic_highway.carla.actions": {"unfreezeTrafficLights", "setAllIntersectionTrafficLightsStatus",
                                           "setTrafficLightStatus", "getTrafficLightStatus"},
-    # pytest calls its hooks by name
-    "dv2s_gym.regress.pytest_plugin": {"pytest_addoption", "pytest_configure", "pytest_runtest_call"},
 }
 """Public functions that nothing in the repository names because their caller finds them by name."""
 
@@ -3247,11 +3243,12 @@ PUBLIC_API = {
 
 def _unnamed_public_functions() -> Dict[str, List[str]]:
     """``{module: [name, ...]}``: top-level public functions and classes of the product that their own module does
-    not use and that no other product module, Scenic model, doc page or ``pyproject.toml`` names."""
+    not use and that no other product module, Scenic model, doc page, ``pyproject.toml`` or the pytest plugin
+    (``dv2s_pytest.py``, outside the packages) names."""
     words = {module: set(re.findall(r"\w+", path.read_text())) for module, path in _modules().items()}
     texts = [p.read_text() for package in PACKAGES for p in (ROOT / package).rglob("*.scenic")]
     texts += [p.read_text() for p in (ROOT / "docs").rglob("*.md")]
-    texts += [(ROOT / name).read_text() for name in ("README.md", "pyproject.toml")]
+    texts += [(ROOT / name).read_text() for name in ("README.md", "pyproject.toml", "dv2s_pytest.py")]
     other_words = set(re.findall(r"\w+", "\n".join(texts)))
     found: Dict[str, List[str]] = {}
     for module, path in sorted(_modules().items()):
