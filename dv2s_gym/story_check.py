@@ -68,11 +68,12 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 from types import SimpleNamespace
 
 import numpy as np
 
+from scenario_bank.elements import Action, ActorKind, Relation
 from scenario_bank.story import StoryError, normalize_story, step_label
 from dv2s_gym.pipeline.semantics.trace import map_view, collision_type, elements_from_trace
 
@@ -91,8 +92,8 @@ CUT_IN_AHEAD = 50.0       # m
 PATH_EXTEND_M = 30.0      # m: a vehicle's path runs on this far past where the episode ends
 TURN_ONSET = math.radians(10)
 TURN_ANGLE = math.radians(55)
-_LATERAL = {"lane_change_left", "lane_change_right", "cut_in", "merge", "drift", "swerve", "pull_out",
-            "lane_change"}
+_LATERAL = frozenset({Action.LANE_CHANGE_LEFT, Action.LANE_CHANGE_RIGHT, Action.CUT_IN, Action.MERGE, Action.DRIFT,
+                      Action.SWERVE, Action.PULL_OUT, Action.LANE_CHANGE})
 
 
 @dataclass
@@ -146,7 +147,7 @@ class _Episode:
         for event in trace.events:
             actors = list(event.get("actors") or [])
             step = self.step_of(float(event.get("time", 0.0)))
-            if event.get("kind") == "lane_change" and actors:
+            if event.get("kind") == Action.LANE_CHANGE and actors:  # the env names the event after the action
                 self.lane_changes.setdefault(actors[0], []).append((step, str(event.get("direction", ""))))
             if event.get("kind") == "collision" and len(actors) == 2:
                 self.collisions.setdefault(actors[0], []).append((step, actors[1]))
@@ -344,12 +345,12 @@ class _Detector:
             ref = self.names.get(other)
             if ref is None:
                 return f"no actor named {other!r} in the episode"
-            if relation == "crossing_path":
+            if relation == Relation.CROSSING_PATH:
                 entries = self._path_entries_of(ref, name, occ)
                 gap = min((e.gap_s(name, i) for i in entries), default=math.inf) if ref == "ego" else 0.0
                 if entries and (within is None or gap <= within):
                     continue
-                if e.kinds.get(name) != "pedestrian":
+                if e.kinds.get(name) != ActorKind.PEDESTRIAN:
                     pet = self._encroachment(ref, name)
                     if pet is not None and (within is None or pet <= within) or self._met_in_junction(ref, name):
                         continue
@@ -363,7 +364,7 @@ class _Detector:
                 return f"{when}: {other} is not in the episode then"
             if not self._relation(relation, ref, name, at):
                 return f"{when}: not {relation} {other}"
-        if within is not None and not any(r == "crossing_path" for r, _ in step.get("relations", [])):
+        if within is not None and not any(r == Relation.CROSSING_PATH for r, _ in step.get("relations", [])):
             gap = e.gap_s(name, at)
             if gap > within:
                 where = "not ahead of the ego" if math.isinf(gap) else f"{gap:.1f} s ahead of the ego"
@@ -435,26 +436,15 @@ class _Detector:
         return self.e.path_entries(name, max(0, occ.event - lead_in), occ.end, reference=ref)
 
     def _relation(self, relation: str, ref: str, name: str, i: int) -> bool:
-        ahead, left = self.e.rel(ref, name, i)
-        if relation == "ahead_of":
-            return ahead > 2.0
-        if relation == "behind":
-            return ahead < -2.0
-        if relation == "left_of":
-            return left > LANE_HALF
-        if relation == "right_of":
-            return left < -LANE_HALF
-        if relation == "same_lane":
-            return abs(left) <= LANE_HALF
-        if relation == "oncoming":
-            gap = abs((self.e.tracks[name][i, 2] - self.e.tracks[ref][i, 2] + math.pi) % (2 * math.pi) - math.pi)
-            return gap > math.radians(135)
-        raise StoryError(f"unknown relation {relation!r}")
+        holds = _RELATION_HOLDS.get(relation)
+        if holds is None:
+            raise StoryError(f"unknown relation {relation!r}")
+        return holds(self.e, ref, name, i)
 
     def _holds(self, action: str, name: str, at: int) -> bool:
         track = self.e.tracks[name][at:]
         track = track[~np.isnan(track[:, 0])]
-        if action == "stop":
+        if action == Action.STOP:
             return bool(len(track)) and bool(np.all(np.abs(track[:, 3]) < STOP_SPEED))
         return True
 
@@ -462,9 +452,9 @@ class _Detector:
     def collision_credit(self, step: Mapping[str, Any], after: int) -> bool:
         """Whether the ego hit the step's actor after the step's manoeuvre began (and after ``after``)."""
         name = self.names[step["actor"]]
-        if step["action"] == "cross" or name == "ego":
+        if step["action"] == Action.CROSS or name == "ego":
             return False
-        if any(r == "crossing_path" for r, _ in step.get("relations", [])):
+        if any(r == Relation.CROSSING_PATH for r, _ in step.get("relations", [])):
             return False
         hits = [i for i, other in self.e.collisions.get(name, []) if other == "ego" and i >= after]
         if not hits:
@@ -473,125 +463,162 @@ class _Detector:
         return onset is not None and onset <= hits[0]
 
     def onset(self, name: str, action: str, after: int = 0) -> Optional[int]:
-        """The first step (at or after ``after``) at which the actor had begun ``action``."""
-        e = self.e
-        track = e.tracks[name]
-        speed = np.abs(track[:, 3])
+        """The first step (at or after ``after``) at which the actor had begun ``action`` (:data:`_ONSETS`; an
+        action without a rule there has begun at the actor's first step)."""
+        speed = np.abs(self.e.tracks[name][:, 3])
         valid = ~np.isnan(speed)
-        idx = [i for i in range(after, e.n) if valid[i]]
+        idx = [i for i in range(after, self.e.n) if valid[i]]
         if not idx:
             return None
-        if action in ("brake", "stop"):
-            peak = -math.inf
-            for i in idx:
-                peak = max(peak, speed[i])
-                if peak - speed[i] >= ONSET_SPEED_CHANGE or (action == "stop" and speed[i] < STOP_SPEED):
-                    return i
-            return None
-        if action == "accelerate":
-            low = math.inf
-            for i in idx:
-                low = min(low, speed[i])
-                if speed[i] - low >= ONSET_SPEED_CHANGE:
-                    return i
-            return None
-        if action in _LATERAL:
-            start = track[idx[0]]
-            for i in idx:
-                if abs(_frame(start, track[i])[1]) >= ONSET_SHIFT:
-                    return i
-            return None
-        if action == "overtake":
-            for i in idx:
-                if e.present("ego", i) and e.rel("ego", name, i)[0] > -EGO_FRONT * 2:
-                    return i
-            return None
-        if action in ("turn_left", "turn_right", "u_turn"):
-            for i in idx:
-                if _angle(track[i, 2] - track[idx[0], 2]) >= TURN_ONSET:
-                    return i
-            return None
-        if action == "go_straight":
-            inside = self._in_junction(name)
-            hits = [i for i in idx if inside[i]]
-            return hits[0] if hits else None
-        return idx[0]
+        begun = _ONSETS.get(action)
+        return idx[0] if begun is None else begun(self, name, action, idx)
+
+    def _slowing_onset(self, name: str, action: str, idx: List[int]) -> Optional[int]:
+        """A brake (or stop) has begun: the speed is down by :data:`ONSET_SPEED_CHANGE` from its peak (a stop: or
+        under :data:`STOP_SPEED`)."""
+        speed = np.abs(self.e.tracks[name][:, 3])
+        peak = -math.inf
+        for i in idx:
+            peak = max(peak, speed[i])
+            if peak - speed[i] >= ONSET_SPEED_CHANGE or (action == Action.STOP and speed[i] < STOP_SPEED):
+                return i
+        return None
+
+    def _speeding_onset(self, name: str, action: str, idx: List[int]) -> Optional[int]:
+        """A speed-up has begun: the speed is up by :data:`ONSET_SPEED_CHANGE` from its low."""
+        speed = np.abs(self.e.tracks[name][:, 3])
+        low = math.inf
+        for i in idx:
+            low = min(low, speed[i])
+            if speed[i] - low >= ONSET_SPEED_CHANGE:
+                return i
+        return None
+
+    def _lateral_onset_from_start(self, name: str, action: str, idx: List[int]) -> Optional[int]:
+        """A sideways manoeuvre has begun: the actor is :data:`ONSET_SHIFT` sideways of where it was."""
+        track = self.e.tracks[name]
+        start = track[idx[0]]
+        for i in idx:
+            if abs(_frame(start, track[i])[1]) >= ONSET_SHIFT:
+                return i
+        return None
+
+    def _overtake_onset(self, name: str, action: str, idx: List[int]) -> Optional[int]:
+        """An overtake has begun: the actor is within two ego lengths behind the ego's front."""
+        e = self.e
+        for i in idx:
+            if e.present("ego", i) and e.rel("ego", name, i)[0] > -EGO_FRONT * 2:
+                return i
+        return None
+
+    def _turn_onset(self, name: str, action: str, idx: List[int]) -> Optional[int]:
+        """A turn has begun: the heading has turned :data:`TURN_ONSET`."""
+        track = self.e.tracks[name]
+        for i in idx:
+            if _angle(track[i, 2] - track[idx[0], 2]) >= TURN_ONSET:
+                return i
+        return None
+
+    def _straight_onset(self, name: str, action: str, idx: List[int]) -> Optional[int]:
+        """Going straight has begun: the actor is in the junction area."""
+        inside = self._in_junction(name)
+        hits = [i for i in idx if inside[i]]
+        return hits[0] if hits else None
 
     # ------------------------------------------------------------ occurrences
     def occurrences(self, name: str, action: str) -> List[_Occurrence]:
-        e = self.e
-        track = e.tracks[name]
+        """Every occurrence of ``action`` by the actor (:data:`_OCCURRENCES`; an action without a rule there is read
+        off the whole track by the trace semantics)."""
+        track = self.e.tracks[name]
         valid = np.flatnonzero(~np.isnan(track[:, 0]))
         if valid.size < 2:
             return []
         first, last = int(valid[0]), int(valid[-1])
-        speed = np.abs(track[:, 3])
-        window = max(1, int(round(WINDOW_S / e.dt)))
-        if action in ("brake", "accelerate"):
-            sign = 1.0 if action == "brake" else -1.0
-            out = []
-            for i in range(first, last):
-                ahead = speed[i + 1: min(last, i + window) + 1]
-                if ahead.size and np.nanmax(sign * (speed[i] - ahead)) >= SPEED_CHANGE:
-                    out.append(_Occurrence(i, i, last))
-            return out
-        if action == "stop":
-            # standing still after driving, or from the start (parked) until it first drives
-            out, driven, standing = [], False, True
-            for i in range(first, last + 1):
-                driven = driven or speed[i] > 2.0
-                standing = standing and speed[i] < STOP_SPEED
-                if speed[i] < STOP_SPEED and (driven or standing):
-                    out.append(_Occurrence(i, i, last))
-            return out
-        if action in ("lane_change_left", "lane_change_right"):
-            side = action.rsplit("_", 1)[1]
-            return [_Occurrence(self._lateral_onset(name, i), i, last)
-                    for i, direction in e.lane_changes.get(name, []) if direction == side]
-        if action == "lane_change":
-            return [_Occurrence(self._lateral_onset(name, i), i, last) for i, _ in e.lane_changes.get(name, [])]
-        if action in ("cut_in", "merge"):
-            out = []
-            for i, _ in e.lane_changes.get(name, []):
-                j = min(last, i + int(round(1.0 / e.dt)))
-                if e.present("ego", j):
-                    ahead, left = e.rel("ego", name, j)
-                    if abs(left) <= LANE_HALF and 0 < ahead < CUT_IN_AHEAD:
-                        out.append(_Occurrence(self._lateral_onset(name, i), i, last))
-            if action == "merge" and e.present("ego", first):
-                gap = _angle(track[first, 2] - e.tracks["ego"][first, 2])
-                if math.radians(45) <= gap <= math.radians(135):
-                    for i in range(first, last + 1):
-                        if e.present("ego", i) and e.along_path("ego", name, i) is not None \
-                                and _angle(track[i, 2] - e.tracks["ego"][i, 2]) <= math.radians(20):
-                            out.append(_Occurrence(first, i, last))
-                            break
-            return sorted(out, key=lambda o: o.event)
-        if action == "overtake":
-            out, behind = [], False
-            for i in range(first, last + 1):
-                if not e.present("ego", i):
-                    continue
-                ahead, _ = e.rel("ego", name, i)
-                if ahead < -2.0:
-                    behind = True
-                elif behind and ahead >= 0.0:
-                    out.append(_Occurrence(self.onset(name, "overtake", first) or i, i, last))
-                    behind = False
-            return out
-        if action == "cross":
-            moving = [i for i in range(first, last + 1) if speed[i] > 0.2]
-            onset = moving[0] if moving else first
-            return [_Occurrence(onset, i, min(last, i + 1)) for i in e.path_entries(name, first, last)]
-        if action in ("go_straight", "turn_left", "turn_right"):
-            return self._junction_way(name, action, first, last)
-        if action in ("collide", "collide_rear_end", "collide_side", "collide_head_on"):
-            out = []
-            for i, other in e.collisions.get(name, []):
-                if action == "collide" or self._collision_type(name, other, i) == action:
-                    out.append(_Occurrence(i, i, i))
-            return out
-        return self._whole_track(name, action, first, last)
+        return _OCCURRENCES.get(action, _Detector._whole_track)(self, name, action, first, last)
+
+    def _speed_changes(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
+        """Brakes / speed-ups: the start of each window in which the speed falls / rises by :data:`SPEED_CHANGE`."""
+        speed = np.abs(self.e.tracks[name][:, 3])
+        window = max(1, int(round(WINDOW_S / self.e.dt)))
+        sign = 1.0 if action == Action.BRAKE else -1.0
+        out = []
+        for i in range(first, last):
+            ahead = speed[i + 1: min(last, i + window) + 1]
+            if ahead.size and np.nanmax(sign * (speed[i] - ahead)) >= SPEED_CHANGE:
+                out.append(_Occurrence(i, i, last))
+        return out
+
+    def _stops(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
+        """Standing still after driving, or from the start (parked) until it first drives."""
+        speed = np.abs(self.e.tracks[name][:, 3])
+        out, driven, standing = [], False, True
+        for i in range(first, last + 1):
+            driven = driven or speed[i] > 2.0
+            standing = standing and speed[i] < STOP_SPEED
+            if speed[i] < STOP_SPEED and (driven or standing):
+                out.append(_Occurrence(i, i, last))
+        return out
+
+    def _directed_lane_changes(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
+        """The env's lane-change events of the actor in the action's direction."""
+        side = action.rsplit("_", 1)[1]
+        return [_Occurrence(self._lateral_onset(name, i), i, last)
+                for i, direction in self.e.lane_changes.get(name, []) if direction == side]
+
+    def _lane_changes(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
+        """The env's lane-change events of the actor, either way."""
+        return [_Occurrence(self._lateral_onset(name, i), i, last) for i, _ in self.e.lane_changes.get(name, [])]
+
+    def _cut_ins(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
+        """Lane changes into the ego's lane ahead of it; a merge also from a side road onto the ego's path."""
+        e = self.e
+        track = e.tracks[name]
+        out = []
+        for i, _ in e.lane_changes.get(name, []):
+            j = min(last, i + int(round(1.0 / e.dt)))
+            if e.present("ego", j):
+                ahead, left = e.rel("ego", name, j)
+                if abs(left) <= LANE_HALF and 0 < ahead < CUT_IN_AHEAD:
+                    out.append(_Occurrence(self._lateral_onset(name, i), i, last))
+        if action == Action.MERGE and e.present("ego", first):
+            gap = _angle(track[first, 2] - e.tracks["ego"][first, 2])
+            if math.radians(45) <= gap <= math.radians(135):
+                for i in range(first, last + 1):
+                    if e.present("ego", i) and e.along_path("ego", name, i) is not None \
+                            and _angle(track[i, 2] - e.tracks["ego"][i, 2]) <= math.radians(20):
+                        out.append(_Occurrence(first, i, last))
+                        break
+        return sorted(out, key=lambda o: o.event)
+
+    def _overtakes(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
+        """The moments the actor passes the ego, from behind it to ahead of it."""
+        e = self.e
+        out, behind = [], False
+        for i in range(first, last + 1):
+            if not e.present("ego", i):
+                continue
+            ahead, _ = e.rel("ego", name, i)
+            if ahead < -2.0:
+                behind = True
+            elif behind and ahead >= 0.0:
+                out.append(_Occurrence(self.onset(name, Action.OVERTAKE, first) or i, i, last))
+                behind = False
+        return out
+
+    def _crossings(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
+        """The moments the actor enters the ego's path from the side."""
+        speed = np.abs(self.e.tracks[name][:, 3])
+        moving = [i for i in range(first, last + 1) if speed[i] > 0.2]
+        onset = moving[0] if moving else first
+        return [_Occurrence(onset, i, min(last, i + 1)) for i in self.e.path_entries(name, first, last)]
+
+    def _collisions(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
+        """The actor's collision events (of the action's collision type, for a typed one)."""
+        out = []
+        for i, other in self.e.collisions.get(name, []):
+            if action == Action.COLLIDE or self._collision_type(name, other, i) == action:
+                out.append(_Occurrence(i, i, i))
+        return out
 
     def _collision_type(self, name: str, other: str, i: int) -> Optional[str]:
         for k in range(i, -1, -1):
@@ -635,12 +662,12 @@ class _Detector:
         leave = exits[0] if exits else last
         turned = float((track[leave, 2] - track[max(first, enter - 1), 2] + math.pi) % (2 * math.pi) - math.pi)
         crashed = [i for i, _ in self.e.collisions.get(name, []) if enter <= i <= leave]
-        if action == "go_straight":
+        if action == Action.GO_STRAIGHT:
             approach = max(first, enter - int(round(1.0 / self.e.dt)))
             if abs(turned) < math.radians(30) and (exits or crashed):
                 return [_Occurrence(approach, approach, leave)]
             return []
-        want = 1.0 if action == "turn_right" else -1.0  # a growing heading turns right (y drawn downward)
+        want = 1.0 if action == Action.TURN_RIGHT else -1.0  # a growing heading turns right (y drawn downward)
         full = track[last, 2] - track[first, 2]
         net = float((full + math.pi) % (2 * math.pi) - math.pi)
         if want * net >= TURN_ANGLE or (crashed and want * turned >= math.radians(20)):
@@ -656,8 +683,56 @@ class _Detector:
         shown = _actor_elements(self.e.trace, name)
         if action not in shown:
             return []
-        start = self.onset(name, action, first) if action in _LATERAL | {"u_turn"} else first
+        start = self.onset(name, action, first) if action in _LATERAL | {Action.U_TURN} else first
         return [_Occurrence(start if start is not None else first, start if start is not None else first, last)]
+
+
+def _oncoming(episode: _Episode, ref: str, name: str, i: int) -> bool:
+    """``name`` heads more than 135 degrees off ``ref``'s heading at step ``i``."""
+    gap = abs((episode.tracks[name][i, 2] - episode.tracks[ref][i, 2] + math.pi) % (2 * math.pi) - math.pi)
+    return gap > math.radians(135)
+
+
+_RELATION_HOLDS: Dict[Relation, Callable[[_Episode, str, str, int], bool]] = {
+    Relation.AHEAD_OF: lambda e, ref, name, i: e.rel(ref, name, i)[0] > 2.0,
+    Relation.BEHIND: lambda e, ref, name, i: e.rel(ref, name, i)[0] < -2.0,
+    Relation.LEFT_OF: lambda e, ref, name, i: e.rel(ref, name, i)[1] > LANE_HALF,
+    Relation.RIGHT_OF: lambda e, ref, name, i: e.rel(ref, name, i)[1] < -LANE_HALF,
+    Relation.SAME_LANE: lambda e, ref, name, i: abs(e.rel(ref, name, i)[1]) <= LANE_HALF,
+    Relation.ONCOMING: _oncoming,
+}
+"""Whether a relation holds of an actor to another (``ref``) at a trace step; ``crossing_path`` is read over the
+manoeuvre instead (``_Detector._fails``)."""
+
+_Onset = Callable[[_Detector, str, str, List[int]], Optional[int]]
+_ONSETS: Dict[Action, _Onset] = {
+    Action.BRAKE: _Detector._slowing_onset, Action.STOP: _Detector._slowing_onset,
+    Action.ACCELERATE: _Detector._speeding_onset,
+    **{action: _Detector._lateral_onset_from_start for action in _LATERAL},
+    Action.OVERTAKE: _Detector._overtake_onset,
+    Action.TURN_LEFT: _Detector._turn_onset, Action.TURN_RIGHT: _Detector._turn_onset,
+    Action.U_TURN: _Detector._turn_onset,
+    Action.GO_STRAIGHT: _Detector._straight_onset,
+}
+"""How the start of each action's manoeuvre is found (``_Detector.onset``), over the steps the actor is in."""
+
+_Occurrences = Callable[[_Detector, str, str, int, int], List[_Occurrence]]
+_OCCURRENCES: Dict[Action, _Occurrences] = {
+    Action.BRAKE: _Detector._speed_changes, Action.ACCELERATE: _Detector._speed_changes,
+    Action.STOP: _Detector._stops,
+    Action.LANE_CHANGE_LEFT: _Detector._directed_lane_changes,
+    Action.LANE_CHANGE_RIGHT: _Detector._directed_lane_changes,
+    Action.LANE_CHANGE: _Detector._lane_changes,
+    Action.CUT_IN: _Detector._cut_ins, Action.MERGE: _Detector._cut_ins,
+    Action.OVERTAKE: _Detector._overtakes,
+    Action.CROSS: _Detector._crossings,
+    Action.GO_STRAIGHT: _Detector._junction_way, Action.TURN_LEFT: _Detector._junction_way,
+    Action.TURN_RIGHT: _Detector._junction_way,
+    **{action: _Detector._collisions for action in (Action.COLLIDE, Action.COLLIDE_REAR_END, Action.COLLIDE_SIDE,
+                                                    Action.COLLIDE_HEAD_ON)},
+}
+"""How the occurrences of each action are found (``_Detector.occurrences``), between the actor's first and last
+step in the trace; the other actions are read off the whole track (``_Detector._whole_track``)."""
 
 
 def _actor_elements(trace, name: str) -> set:

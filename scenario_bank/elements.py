@@ -40,6 +40,8 @@ from scenario_bank.errors import DV2SError
 
 __all__ = [
     "ActorKind",
+    "Action",
+    "Relation",
     "ROADS",
     "PARTICIPANTS",
     "ACTIONS",
@@ -74,26 +76,70 @@ class ActorKind(StrEnum):
 PARTICIPANTS = tuple(str(kind) for kind in ActorKind)
 """The kinds of :class:`ActorKind`, as plain strings. Vans, SUVs and pickups are ``car``; scooters and cyclists
 ride a ``bicycle``; a motorcyclist a ``motorcycle``."""
-ACTIONS = (
-    "brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
-    "turn_left", "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift",
-    "collide_rear_end", "collide_side", "collide_head_on",
-    "u_turn", "reverse", "swerve", "pull_out", "lane_change",
-)
-"""``swerve``: a quick sideways move within or out of the lane that is not a completed lane change;
-``pull_out``: leaving a parking spot, the shoulder or a driveway into the traffic lane;
-``reverse``: driving backwards; ``u_turn``: turning round to drive the opposite way;
-``lane_change``: a lane change whose direction the source does not give (the metrics match it with
-either ``lane_change_left`` or ``lane_change_right``, see :func:`with_undirected`)."""
-COLLISION_TYPES = ("collide_rear_end", "collide_side", "collide_head_on")
+
+
+class Action(StrEnum):
+    """An action of the vocabulary, one of :data:`ACTIONS` (in its order); ``str``-valued as :class:`ActorKind` is
+    (``Action.BRAKE == "brake"``): code compares actions with these, never with a string spelled out."""
+
+    BRAKE = "brake"
+    STOP = "stop"
+    ACCELERATE = "accelerate"
+    LANE_CHANGE_LEFT = "lane_change_left"
+    LANE_CHANGE_RIGHT = "lane_change_right"
+    CUT_IN = "cut_in"
+    MERGE = "merge"
+    TURN_LEFT = "turn_left"
+    TURN_RIGHT = "turn_right"
+    CROSS = "cross"
+    COLLIDE = "collide"
+    KEEP_LANE = "keep_lane"
+    GO_STRAIGHT = "go_straight"
+    OVERTAKE = "overtake"
+    DRIFT = "drift"
+    COLLIDE_REAR_END = "collide_rear_end"
+    COLLIDE_SIDE = "collide_side"
+    COLLIDE_HEAD_ON = "collide_head_on"
+    U_TURN = "u_turn"
+    """Turning round to drive the opposite way."""
+    REVERSE = "reverse"
+    """Driving backwards."""
+    SWERVE = "swerve"
+    """A quick sideways move within or out of the lane that is not a completed lane change."""
+    PULL_OUT = "pull_out"
+    """Leaving a parking spot, the shoulder or a driveway into the traffic lane."""
+    LANE_CHANGE = "lane_change"
+    """A lane change whose direction the source does not give (the metrics match it with either
+    ``lane_change_left`` or ``lane_change_right``, see :func:`with_undirected`)."""
+
+
+class Relation(StrEnum):
+    """A relation of the vocabulary, one of :data:`RELATIONS` (in its order); ``str``-valued as :class:`ActorKind`
+    is (``Relation.AHEAD_OF == "ahead_of"``): code compares relations with these, never with a string spelled out."""
+
+    AHEAD_OF = "ahead_of"
+    BEHIND = "behind"
+    LEFT_OF = "left_of"
+    RIGHT_OF = "right_of"
+    ONCOMING = "oncoming"
+    SAME_LANE = "same_lane"
+    CROSSING_PATH = "crossing_path"
+
+
+ACTIONS = tuple(str(action) for action in Action)
+"""The actions of :class:`Action`, as plain strings (its members say what ``u_turn``, ``reverse``, ``swerve``,
+``pull_out`` and ``lane_change`` mean)."""
+COLLISION_TYPES = tuple(str(action) for action in (Action.COLLIDE_REAR_END, Action.COLLIDE_SIDE,
+                                                   Action.COLLIDE_HEAD_ON))
 """The collision-type actions (each comes with ``collide``)."""
-RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane", "crossing_path")
+RELATIONS = tuple(str(relation) for relation in Relation)
+"""The relations of :class:`Relation`, as plain strings."""
 
 _VEHICLE_ACTIONS = frozenset(ACTIONS)
 CAN_DO: Dict[str, FrozenSet[str]] = {
     **{kind: _VEHICLE_ACTIONS for kind in (ActorKind.EGO, ActorKind.CAR, ActorKind.TRUCK, ActorKind.BUS,
                                            ActorKind.MOTORCYCLE, ActorKind.BICYCLE)},
-    ActorKind.PEDESTRIAN: frozenset({"cross", "stop", "collide"} | set(COLLISION_TYPES)),
+    ActorKind.PEDESTRIAN: frozenset(map(str, (Action.CROSS, Action.STOP, Action.COLLIDE, *COLLISION_TYPES))),
     ActorKind.OBSTACLE: frozenset(),
 }
 """Participant type -> the actions a participant of that type can do at all, whether a generator builds them or
@@ -199,7 +245,8 @@ def element_set(data: Union[Elements, Mapping[str, Any]]) -> FrozenSet[Element]:
     return frozenset(elements)
 
 
-_DIRECTED = {"lane_change_left": "lane_change", "lane_change_right": "lane_change"}
+_DIRECTED = {str(Action.LANE_CHANGE_LEFT): str(Action.LANE_CHANGE),
+             str(Action.LANE_CHANGE_RIGHT): str(Action.LANE_CHANGE)}
 
 
 def with_undirected(elements: FrozenSet[Element]) -> FrozenSet[Element]:

@@ -8,7 +8,7 @@ import warnings
 import pytest
 
 from dv2s_gym.mining.family import scenario_family
-from dv2s_gym.loop.run import _with_parents
+from dv2s_gym.loop.mined import with_parents
 from dv2s_gym.loop.split import family_of, split_by_family
 from scenario_bank.bank import Bank
 from scenario_bank.errors import NearDuplicateWarning
@@ -53,7 +53,7 @@ def test_the_loop_split_keeps_a_twin_with_its_held_out_family(tmp_path):
     twins = sorted(n for n in names if families[n] != n or sum(v == n for v in families.values()) > 1)
     assert len(twins) == 2
     kept = [{"scenario": f"mined_{n}", "cluster": f"{n}/collision/x", "parent": n} for n in names]
-    entries = _with_parents(kept, str(bank.root))
+    entries = with_parents(kept, str(bank.root))
     for seed in range(6):
         split = split_by_family(entries, 0.5, seed=seed)
         sides = {e.to_dict()["parent"]: e.to_dict()["scenario"] in split.held_out for e in entries}

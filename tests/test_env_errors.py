@@ -319,10 +319,24 @@ def test_a_seed_that_is_not_an_integer_at_least_zero_is_refused_naming_it(seed):
     env.close()
 
 
+@pytest.mark.parametrize("command", [["run", BRAKES], ["demo"], ["mine"], ["regress", "--policy", "idm"], ["train"],
+                                     ["loop"], ["bank", "sample"], ["generate", "a car brakes"], ["convert", "v.mp4"]])
+@pytest.mark.parametrize("value", ["-5", "x"])
+def test_every_seed_option_refuses_a_bad_seed_naming_the_option(command, value, capsys):
+    from dv2s_gym.cli import main
+
+    with pytest.raises(SystemExit) as stop:
+        main([*command, "--seed", value])
+    assert stop.value.code == 2
+    assert f"argument --seed: '{value}' is not a seed: give an integer >= 0" in capsys.readouterr().err
+
+
 def test_dv2s_run_refuses_a_negative_seed_in_one_line():
     import subprocess
 
     done = subprocess.run([sys.executable, "-m", "dv2s_gym.cli", "run", BRAKES, "--seed", "-5"], capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 2
-    assert done.stderr.strip().splitlines()[-1].startswith("dv2s: error: reset(seed=-5): a seed is an integer >= 0")
+    assert done.stderr.strip().splitlines()[-1] == (
+        "dv2s run: error: argument --seed: '-5' is not a seed: give an integer >= 0 (e.g. --seed 0; the same seed "
+        "gives the same scenes) (see `dv2s run --help`)")

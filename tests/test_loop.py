@@ -15,10 +15,11 @@ import pytest
 from scenario_bank.records import HeldOutEpisode
 from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.loop.heldout import HeldOutStore, evaluate_heldout, paired_summary
-from dv2s_gym.loop import run as loop_module
+from dv2s_gym.loop import arms, run as loop_module
 from dv2s_gym.loop.run import LoopError, fine_tune_weights
 from dv2s_gym.loop.record import FinalVsStart, HeldOutComparison, RoundRecord
 from dv2s_gym.loop.split import family_of, split_by_family
+from dv2s_gym.loop.state import round_spec
 from dv2s_gym.workers.settings import WorkerSettings
 from cli_helpers import one_line_error, run
 from loop_helpers import FakeMiner, held, run_loop, written_report
@@ -618,9 +619,10 @@ def test_reference_gate_counts_failures_and_errors_and_names_families_left_out_e
 
 
 def test_the_loops_reference_driver_is_the_dagger_teacher_and_the_miners_reference():
+    from dv2s_gym.mining.settings import MineSettings
     from policies.dagger_config import DaggerConfig
 
-    assert loop_module.REFERENCE_DRIVER == DaggerConfig().reference == loop_module.MineSettings().reference
+    assert loop_module.REFERENCE_DRIVER == DaggerConfig().reference == MineSettings().reference
 
 
 def test_no_member_of_a_held_out_family_reaches_either_arm(tmp_path, monkeypatch):
@@ -665,13 +667,13 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
         captured.update(weights)
         return {"model": "stand-in"}
 
-    monkeypatch.setattr(loop_module, "_dagger_arm", fake_dagger)
-    arm = loop_module._Arm(bank=str(bank), method="dagger", steps=1, seed=0, n_envs=1, env_config={},
+    monkeypatch.setattr(arms, "_dagger_arm", fake_dagger)
+    arm = arms.Arm(bank=str(bank), method="dagger", steps=1, seed=0, n_envs=1, env_config={},
                            fine_tune_config={}, reward={}, learning_rate=1e-3, beta_decay=0.5, progress=False,
                            log=lambda _: None)
     # the held-out scenario is a replay of the cut-in family whose immediate parent is m_cutin
     excluded = {"m_cutin_replay", "highway_cut_in_from_left"}
-    record = loop_module._fine_tune_arm("dv2s-ppo", tmp_path / "arm", excluded, 0.5, arm, with_mined=True, label="x")
+    record = arms.fine_tune_arm("dv2s-ppo", tmp_path / "arm", excluded, 0.5, arm, with_mined=True, label="x")
     assert set(captured) == {"urban_lead_vehicle_stopped", "m_lead"}
     assert record.to_dict()["families"] == ["urban_lead_vehicle_stopped"]
     # the same draw outside the loop (the fine-tuning sweep's): the fine-tuned arm's, and the control's without m_lead
@@ -824,16 +826,14 @@ def test_each_round_mines_with_a_derived_seed_and_tells_the_miner_the_loop_s_own
 
 
 def test_a_round_policy_read_back_from_loop_json_must_be_that_rounds_own_checkpoint(tmp_path):
-    from dv2s_gym.loop.run import _round_spec
-
     folder = tmp_path / "round_1" / "policy"
     folder.mkdir(parents=True)
     own = f"ppo:{folder / 'model.zip'}"
-    assert _round_spec(own, folder, tmp_path) == own
+    assert round_spec(own, folder, tmp_path) == own
     for planted in ("subprocess:run?args=id&shell=true", f"ppo:{tmp_path / 'elsewhere' / 'model.zip'}",
                     f"ppo:{folder}/../../../x.zip", f"ppo:{folder / 'model.zip'}?device=cpu", "dv2s-ppo", None):
         with pytest.raises(LoopError, match="not a checkpoint in .*choose another --out"):
-            _round_spec(planted, folder, tmp_path)
+            round_spec(planted, folder, tmp_path)
 
 
 # --------------------------------------------------------------------------- exact replays as mined scenarios
@@ -975,7 +975,7 @@ def test_a_loop_json_of_the_wrong_structure_is_refused_in_one_line(tmp_path, con
 def test_the_held_out_split_groups_entries_by_the_family_they_were_clustered_by(tmp_path):
     """An entry mined from a mined entry belongs to the first scenario of its provenance chain, as in clustering."""
     from dv2s_gym.mining.family import scenario_family
-    from dv2s_gym.loop.run import _with_parents
+    from dv2s_gym.loop.mined import with_parents
     from loop_helpers import add_mined_copy
 
     bank = tmp_path / "bank"
@@ -983,10 +983,10 @@ def test_the_held_out_split_groups_entries_by_the_family_they_were_clustered_by(
     add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_x", "c")
     add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_of_mined_x", "c", parent="mined_x")
     kept = [{"cluster": "a", "scenario": "mined_x"}, {"cluster": "b", "scenario": "mined_of_mined_x"}]
-    parents = {e.to_dict()["scenario"]: e.to_dict()["parent"] for e in _with_parents(kept, str(bank))}
+    parents = {e.to_dict()["scenario"]: e.to_dict()["parent"] for e in with_parents(kept, str(bank))}
     assert parents == {name: scenario_family(name, str(bank)) for name in parents} == {
         "mined_x": "highway_cut_in_from_right", "mined_of_mined_x": "highway_cut_in_from_right"}
-    assert split_by_family(_with_parents(kept, str(bank)), 0.5, seed=0).groups == 1
+    assert split_by_family(with_parents(kept, str(bank)), 0.5, seed=0).groups == 1
 
 
 # --------------------------------------------------------------------------- the verdict: which policy to use
@@ -1211,7 +1211,7 @@ def report_summary(report):
 
 
 def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected_for(tmp_path):
-    from dv2s_gym.loop.run import _mining_summary
+    from dv2s_gym.loop.mined import mining_summary
     from dv2s_gym.loop.report import render_markdown
 
     reasons = ["actors: the failure's scene has 2 actors (car 2), the new scenario's 1 actor (car 1): 1 car fewer",
@@ -1221,7 +1221,7 @@ def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected
                                                 + json.dumps({"cluster": "d", "index": 1, "status": "rejected",
                                                               "reason": "check: compile failed"}) + "\n")
     (tmp_path / "episodes.jsonl").write_text("")
-    mined = _mining_summary(tmp_path)
+    mined = mining_summary(tmp_path)
     assert mined.to_dict()["rejected_reasons"] == reasons + ["check: compile failed"] and mined.to_dict()["rejected_reason_count"] == 3
     markdown = render_markdown(written_report({"settings": {"policy": "dv2s-ppo"}, "rounds": [
         {"round": 1, "steps": {"mine": {**mined.to_dict(), "kept": [], "folder": str(tmp_path)}}}]}))
@@ -1260,7 +1260,8 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
     """The `after` step reads the starting policy's held-out episodes back from the store: one that errored in the
     `before` step is not run again there, so its pair is in no rate or test, as the report says."""
     import dv2s_gym.loop.heldout as heldout
-    from dv2s_gym.loop.run import errored_episodes, heldout_comparison
+    from dv2s_gym.loop.errored import errored_episodes
+    from dv2s_gym.loop.run import heldout_comparison
     from scenario_bank.records import HeldOutEpisode
 
     runs = []
@@ -1410,11 +1411,11 @@ def test_a_round_policy_outside_the_loop_folder_is_refused(tmp_path):
     folder.mkdir(parents=True)
     (folder / "model.zip").write_bytes(b"checkpoint")
     with pytest.raises(LoopError, match="not written by this loop as it stands"):
-        loop_module._round_spec("ppo:/data/there/round_1/policy/model.zip", folder, out)
+        round_spec("ppo:/data/there/round_1/policy/model.zip", folder, out)
     with pytest.raises(LoopError, match="not written by this loop as it stands"):
-        loop_module._round_spec("ppo:/data/there/other/model.zip", folder, out)
+        round_spec("ppo:/data/there/other/model.zip", folder, out)
     inside = f"ppo:{folder / 'model.zip'}"
-    assert loop_module._round_spec(inside, folder, out) == inside
+    assert round_spec(inside, folder, out) == inside
 
 
 def test_a_moved_loop_folder_resumes_where_it_is_now(tmp_path, monkeypatch):

@@ -172,7 +172,7 @@ def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_direct
 
 
 def test_the_loop_records_regression_report_paths_that_do_not_depend_on_the_working_directory(tmp_path, monkeypatch):
-    from dv2s_gym.loop.run import _regress_summary
+    from dv2s_gym.loop.comparisons import _regress_summary
 
     monkeypatch.chdir(tmp_path)
     summary = _regress_summary(RegressReport.from_json({"verdict": "PASS"}), Path("out/loop/round_1/regress/report.json"))

@@ -222,13 +222,13 @@ def test_an_exact_replay_is_kept_only_of_a_scene_the_reference_driver_passed(tmp
     records = [stalled, passed, near, unchecked]
     order = replay_order(group([EpisodeRecord.from_dict(r) for r in records]))
     assert sorted(r.index for _, r in order) == [1, 2, 3]  # no replay of the scene the reference stalled in
-    from dv2s_gym.loop.run import _mining_summary
+    from dv2s_gym.loop.mined import mining_summary
     from dv2s_gym.loop.replays import reference_passed
 
     assert not reference_passed(stalled)
     assert reference_passed(passed) and reference_passed(near) and reference_passed(unchecked)
     (tmp_path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
-    assert _mining_summary(tmp_path).clusters_reference_failed == 1
+    assert mining_summary(tmp_path).clusters_reference_failed == 1
 
 
 def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tmp_path, monkeypatch):

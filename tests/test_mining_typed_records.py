@@ -40,7 +40,8 @@ DV2S_GYM = ROOT / "dv2s_gym"
 
 TYPED_MODULES = ("mining.behaviour", "mining.cluster", "mining.family", "mining.sampling.rate", "mining.report",
                  "mining.report_record", "mining.html", "mining.conversion.record", "mining.miner", "loop.split",
-                 "loop.run", "loop.record", "loop.report", "loop.report_text", "loop.html", "loop.verdict")
+                 "loop.run", "loop.state", "loop.steps", "loop.mined", "loop.arms", "loop.measures", "loop.comparisons",
+                 "loop.record", "loop.report", "loop.report_text", "loop.html", "loop.verdict")
 """The modules of the miner and the loop (under ``dv2s_gym``) whose functions pass typed records."""
 
 JSON_BOUNDARIES: Dict[str, str] = {
@@ -48,7 +49,7 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "mining.report.build_report_from_records": "takes the run's settings.json as recorded (RunSettings.values)",
     "mining.sampling.rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
     "loop.run.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
-    "loop.run.untouched_settings": "takes the policy's env config, a JSON object of its model card",
+    "loop.comparisons.untouched_settings": "takes the policy's env config, a JSON object of its model card",
 }
 """``"module.function"`` of the typed modules that take or return a JSON object, each with the reason. A record's
 ``to_dict`` (its JSON form) needs no entry."""

@@ -505,7 +505,7 @@ def test_a_private_name_is_refused_whatever_the_spelling(tmp_path, family):
     """A copy of a real module (which imports ``heldout`` and does not define ``_relative_drop``) with a function appended
     that reaches ``_relative_drop``: the by-name rule reports it on the planted lines, and only there."""
     modules = list(_modules())
-    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.steps")
     source = modules[index][1].read_text(encoding="utf-8")
     assert "from dv2s_gym.loop import heldout\n" in source and "_relative_drop" not in defined_names(ast.parse(source))
     assert "_relative_drop" in defined_names(ast.parse((ROOT / "dv2s_gym/loop/heldout.py").read_text(encoding="utf-8")))
@@ -513,10 +513,10 @@ def test_a_private_name_is_refused_whatever_the_spelling(tmp_path, family):
              "import pkgutil\nimport pydoc\nimport sys\n\n\n"
     copy = tmp_path / "loop.py"
     copy.write_text(source + header + PLANTS_BY_NAME[family], encoding="utf-8")
-    before = set(private_names_by_name(modules, only="dv2s_gym.loop.run"))
+    before = set(private_names_by_name(modules, only="dv2s_gym.loop.steps"))
     assert not before
-    modules[index] = ("dv2s_gym.loop.run", copy)
-    added = set(private_names_by_name(modules, only="dv2s_gym.loop.run"))
+    modules[index] = ("dv2s_gym.loop.steps", copy)
+    added = set(private_names_by_name(modules, only="dv2s_gym.loop.steps"))
     first = len((source + header).splitlines())
     assert added and all(name == "_relative_drop" and line > first for _, line, name in added)
 
@@ -525,13 +525,13 @@ def test_a_string_rule_leaves_suffixes_and_a_modules_own_names_alone(tmp_path):
     """Strings that are parts of names (an f-string's literal, a suffix tested by endswith) and strings naming a
     private name the module defines itself are not uses of another module's private name."""
     modules = list(_modules())
-    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.steps")
     copy = tmp_path / "loop.py"
     copy.write_text(modules[index][1].read_text(encoding="utf-8") + "\n\n\n_own = 1\n\n\n"
                     "def _planted(name):\n    return f'{name}_relative_drop', name.endswith('_relative_drop'), getattr(_planted, '_own')\n",
                     encoding="utf-8")
-    modules[index] = ("dv2s_gym.loop.run", copy)
-    assert private_names_by_name(modules, only="dv2s_gym.loop.run") == []
+    modules[index] = ("dv2s_gym.loop.steps", copy)
+    assert private_names_by_name(modules, only="dv2s_gym.loop.steps") == []
 
 
 def test_no_module_imports_another_modules_private_names():
@@ -587,34 +587,34 @@ def test_the_check_sees_private_names_reached_by_reflection_or_a_rebound_name(tm
     """A copy of a real module (which imports ``heldout``) with a function appended that reaches ``heldout``'s
     private ``_relative_drop`` another way than ``from ... import _relative_drop`` or ``heldout._relative_drop``."""
     modules = list(_modules())
-    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.steps")
     source = modules[index][1].read_text(encoding="utf-8")
     assert "from dv2s_gym.loop import heldout\n" in source
     copy = tmp_path / "loop.py"
     body = planted if "return" in planted else f"return {planted}"
     copy.write_text(source + "\n\nimport importlib\nfrom importlib import import_module\nimport dv2s_gym.loop\n\n\n"
                     f"def _planted():\n    {body}\n", encoding="utf-8")
-    before = private_uses(modules, only="dv2s_gym.loop.run")
-    modules[index] = ("dv2s_gym.loop.run", copy)
-    added = sorted(set(private_uses(modules, only="dv2s_gym.loop.run")) - set(before))
+    before = private_uses(modules, only="dv2s_gym.loop.steps")
+    modules[index] = ("dv2s_gym.loop.steps", copy)
+    added = sorted(set(private_uses(modules, only="dv2s_gym.loop.steps")) - set(before))
     last = len(copy.read_text(encoding="utf-8").splitlines())
     planted_uses = {(module, source, found) for module, line, source, found in added if line == last}
-    assert ("dv2s_gym.loop.run", "dv2s_gym.loop.heldout", name) in planted_uses
-    assert {module for module, _, _ in planted_uses} == {"dv2s_gym.loop.run"}
+    assert ("dv2s_gym.loop.steps", "dv2s_gym.loop.heldout", name) in planted_uses
+    assert {module for module, _, _ in planted_uses} == {"dv2s_gym.loop.steps"}
 
 
 def test_the_check_refuses_private_names_of_a_module_loaded_from_an_unknown_file(tmp_path):
     """A module made by ``module_from_spec`` from a file neither its name nor its path tells could be any project
     module: a private name taken from it is refused."""
     modules = list(_modules())
-    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.run")
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.loop.steps")
     copy = tmp_path / "loop.py"
     copy.write_text(modules[index][1].read_text(encoding="utf-8") + "\n\nimport importlib.util\n\n\n"
                     "def _planted(where):\n    spec = importlib.util.spec_from_file_location('anything', where)\n"
                     "    loaded = importlib.util.module_from_spec(spec)\n    return loaded._hidden, loaded.public\n",
                     encoding="utf-8")
-    before = private_uses(modules, only="dv2s_gym.loop.run")
-    modules[index] = ("dv2s_gym.loop.run", copy)
-    added = set(private_uses(modules, only="dv2s_gym.loop.run")) - set(before)
+    before = private_uses(modules, only="dv2s_gym.loop.steps")
+    modules[index] = ("dv2s_gym.loop.steps", copy)
+    added = set(private_uses(modules, only="dv2s_gym.loop.steps")) - set(before)
     last = len(copy.read_text(encoding="utf-8").splitlines())
-    assert added == {("dv2s_gym.loop.run", last, FROM_A_FILE, "_hidden")}
+    assert added == {("dv2s_gym.loop.steps", last, FROM_A_FILE, "_hidden")}

@@ -22,9 +22,8 @@ SCENARIO = "highway_cut_in_from_left"
 
 def _plugin_args() -> list:
     """``-p`` the plugin unless the installed package already registers it (entry point ``dv2s``)."""
-    installed = any(ep.name == "dv2s" and ep.value == "dv2s_gym.regress.pytest_plugin"
-                    for ep in metadata.entry_points(group="pytest11"))
-    return [] if installed else ["-p", "dv2s_gym.regress.pytest_plugin"]
+    installed = any(ep.name == "dv2s" and ep.value == "dv2s_pytest" for ep in metadata.entry_points(group="pytest11"))
+    return [] if installed else ["-p", "dv2s_pytest"]
 
 
 @pytest.fixture
@@ -110,9 +109,11 @@ def test_misspelt():
 
 
 def test_the_plugin_is_registered_for_pytest():
-    """The pytest11 entry point in pyproject.toml names the plugin module (active once installed)."""
+    """The pytest11 entry point in pyproject.toml names the plugin module (active once installed), a top-level module
+    the wheel ships beside the packages."""
     text = (ROOT / "pyproject.toml").read_text()
-    assert '[project.entry-points.pytest11]\ndv2s = "dv2s_gym.regress.pytest_plugin"' in text
+    assert '[project.entry-points.pytest11]\ndv2s = "dv2s_pytest"' in text
+    assert 'py-modules = ["dv2s_pytest"]' in text and (ROOT / "dv2s_pytest.py").is_file()
 
 
 def test_failure_messages_from_a_report_dict(tmp_path):
@@ -157,15 +158,22 @@ def test_the_arguments_of_a_check_are_the_regression_settings():
         regression_arguments("rule", episodes=3)
 
 
-def test_the_plugin_module_loads_nothing_beyond_its_package():
-    """pytest imports the plugin in every session: it adds no module of the project (nor Gymnasium's
-    submodules) to what importing its package loads; the runner loads when a test uses the plugin."""
+def test_loading_the_plugin_loads_no_module_of_the_project():
+    """pytest imports the plugin in every session of an environment with dv2s-gym installed: importing it (in a
+    fresh interpreter, pytest already loaded) loads the plugin module alone, so no package of the project, no
+    Gymnasium and no registration of DV2S-v0; the checks load when a test uses the marker or a fixture."""
     import subprocess
     import sys
 
-    code = ("import sys, pytest, dv2s_gym.regress; before = set(sys.modules); "
-            "import dv2s_gym.regress.pytest_plugin; "
+    code = ("import sys, pytest; before = set(sys.modules); import dv2s_pytest; "
             "print(sorted(set(sys.modules) - before))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={**os.environ, "PYTHONPATH": str(ROOT)}).stdout.strip()
-    assert out == "['dv2s_gym.regress.pytest_plugin']"
+    assert out == "['dv2s_pytest']"
+
+
+def test_the_plugin_and_its_checks_name_one_marker():
+    import dv2s_pytest
+    from dv2s_gym.regress import pytest_plugin
+
+    assert dv2s_pytest.MARKER == pytest_plugin.MARKER == "dv2s_regression"

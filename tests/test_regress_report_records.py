@@ -124,7 +124,7 @@ def test_a_field_of_the_wrong_kind_is_named_and_a_damaged_report_is_refused(tmp_
 
 
 def test_the_consumers_read_a_record_and_its_json_alike():
-    from dv2s_gym.loop import run as loop
+    from dv2s_gym.loop import comparisons as loop
 
     report = _report()
     read_back = RegressReport.from_json(json.loads(json.dumps(report.to_json())))

@@ -2244,8 +2244,6 @@ STARTUP_FRONT: Dict[str, str] = {
                     "only when that command runs",
     "dv2s_gym.pipeline.stages": "the table of DRA and SG backends the command line's choices read: a backend's "
                                 "module is loaded when it is picked",
-    "dv2s_gym.regress.pytest_plugin": "pytest loads the plugin in every test run; the regression runner only "
-                                      "when a test asks for it",
     "dv2s_gym.workers.backends": "the table of worker backends the command line's --backend choices read: a "
                                  "backend's module is loaded when it is made",
 }
@@ -2887,6 +2885,122 @@ def test_the_kind_rule_leaves_tables_of_other_words_alone():
     assert not kind_strings_compared(tree, kinds)
 
 
+def _vocabulary_words() -> frozenset:
+    """The words of the actor-kind, role, action and relation vocabularies (``ActorKind``, ``Role``,
+    ``JunctionRole``, ``Action``, ``Relation``), but ``ego``: that is also the ego actor's name in traces, scripts and
+    stories, which code compares as a name (a kind held as ``kind``/``role``/``noun`` is still checked against
+    ``ego`` by :func:`kind_strings_compared`)."""
+    from dv2s_gym.pipeline.sg.rules.roles import JunctionRole, Role
+    from scenario_bank.elements import Action, ActorKind, Relation
+
+    return frozenset(str(w) for w in (*ActorKind, *Role, *JunctionRole, *Action, *Relation)) - {"ego"}
+
+
+def vocabulary_literals_compared(tree: ast.AST, words: frozenset, tables: frozenset = frozenset()) -> List[str]:
+    """``"line: code"`` of each comparison (``==``, ``!=``, ``in``, ``not in``) one side of which spells out a word of
+    ``words``, whatever the other side is called: a string literal, a tuple, list or set display (or one given to
+    ``frozenset``/``set``/...) holding one, or a name bound at the module's top to a table of them
+    (:func:`kind_tables`; ``tables``: such names the module imports)."""
+    tables = set(tables) | kind_tables(tree, words)
+
+    def spelled(node: ast.AST) -> bool:
+        if isinstance(node, ast.Call) and _base_name(node.func) in _KIND_TABLE_MAKERS and len(node.args) == 1:
+            return spelled(node.args[0])
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.BitOr)):
+            return spelled(node.left) or spelled(node.right)
+        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+            return any(spelled(e) for e in node.elts)
+        return _is_kind_literal(node, words) or (isinstance(node, ast.Name) and node.id in tables)
+
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare) and any(isinstance(op, (ast.Eq, ast.NotEq, ast.In, ast.NotIn))
+                                                 for op in node.ops):
+            if any(spelled(side) for side in (node.left, *node.comparators)):
+                found.append(f"{node.lineno}: {ast.unparse(node).splitlines()[0]}")
+    return found
+
+
+def vocabulary_spelled_out(files: Dict[str, Path], words: frozenset) -> Dict[str, List[str]]:
+    """``path`` -> :func:`vocabulary_literals_compared` for each of ``files`` (relative to the repository), with the
+    tables of vocabulary words each imports from another of them."""
+    trees = {shown: _parsed(path) for shown, path in files.items()}
+    tables = {_module_of(shown): kind_tables(tree, words) for shown, tree in trees.items()}
+    found = {}
+    for shown, tree in trees.items():
+        module = _module_of(shown)
+        imported = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                base = _imported_names(node, module, Path(shown))[-1]
+                imported.update(a.asname or a.name for a in node.names if a.name in tables.get(base, ()))
+        lines = vocabulary_literals_compared(tree, words, frozenset(imported))
+        if lines:
+            found[shown] = lines
+    return found
+
+
+VOCABULARY_SPELLED_OUT: Dict[str, Tuple[int, str]] = {
+    "scenario_bank/bank.py": (2, "'merge' is the --on-duplicate choice there, not the action"),
+    "scenario_bank/scenic2_rules.py": (3, "'behind' is a word of Scenic's syntax there, not the relation"),
+    "envs/dv2s_env.py": (1, "the env's own lane-change event kind"),
+    **{path: (count, "kinds, roles, actions or relations still spelled out: to compare with their enums")
+       for path, count in {
+           "dv2s_gym/mining/conversion/interaction.py": 13, "dv2s_gym/pipeline/semantics/action_rules.py": 6,
+           "dv2s_gym/pipeline/semantics/clauses.py": 14, "dv2s_gym/pipeline/semantics/mentions.py": 6,
+           "dv2s_gym/pipeline/semantics/scene_completion.py": 16, "dv2s_gym/pipeline/semantics/trace.py": 7,
+           "dv2s_gym/pipeline/sg/rules/coverage.py": 8, "dv2s_gym/pipeline/sg/rules/describe.py": 3,
+           "dv2s_gym/pipeline/sg/rules/junction_fit.py": 1, "dv2s_gym/pipeline/sg/rules/junction_roles.py": 10,
+           "dv2s_gym/pipeline/sg/rules/junction_spawn.py": 2, "dv2s_gym/pipeline/sg/rules/junctions.py": 1,
+           "dv2s_gym/pipeline/sg/rules/kerb.py": 3, "dv2s_gym/pipeline/sg/rules/lane_roles.py": 26,
+           "dv2s_gym/pipeline/sg/rules/lane_traffic.py": 5, "dv2s_gym/pipeline/sg/rules/lane_vehicles.py": 13,
+           "dv2s_gym/pipeline/sg/rules/lanes.py": 2, "dv2s_gym/pipeline/sg/rules/manoeuvres.py": 2,
+           "dv2s_gym/pipeline/sg/rules/map_choice.py": 9, "dv2s_gym/pipeline/sg/rules/pedestrians.py": 7,
+           "dv2s_gym/pipeline/sg/rules/standing.py": 4}.items()},
+}
+"""The modules of :data:`KINDS_BY_ENUM` whose comparisons still spell out words of the vocabularies
+(:func:`vocabulary_literals_compared`), with how many and why; every other one of them spells out none. A count only
+falls: the test fails on a module with more and on one with fewer (lower the count with the fix)."""
+
+
+def test_kinds_roles_actions_and_relations_are_compared_through_their_enums_whatever_the_name():
+    """No comparison in the modules of :data:`KINDS_BY_ENUM` spells out an actor kind, a role, an action or a
+    relation, whatever the compared value is called (``participant == "pedestrian"``, ``rel in ("left_of",
+    "right_of")``), beyond what :data:`VOCABULARY_SPELLED_OUT` lists."""
+    found = {path: len(lines) for path, lines in vocabulary_spelled_out(_kind_checked_files(),
+                                                                        _vocabulary_words()).items()}
+    listed = {path: count for path, (count, _) in VOCABULARY_SPELLED_OUT.items()}
+    assert found == listed, (
+        "vocabulary words compared spelled out (use ActorKind, Role, JunctionRole, Action, Relation): "
+        + "; ".join(f"{path}: {found.get(path, 0)} found, {listed.get(path, 0)} listed"
+                    for path in sorted(set(found) | set(listed)) if found.get(path, 0) != listed.get(path, 0)))
+
+
+@pytest.mark.parametrize("planted, caught", [
+    ('if participant == "pedestrian" or other_kind_name in ("truck", "bus"):\n        return 1\n', 2),
+    ('if relation == "ahead_of":\n        return 1\n', 1),
+    ('if action in ("brake", "stop") or "left_of" not in rels:\n        return 1\n', 2),
+    ('if lane != "adjacent" and step["action"] == "cross":\n        return 1\n', 2),
+    ('if x in _PLANTED_ACTIONS:\n        return 1\n', 1),
+    ('if name == "ego" or road == "highway" or action == Action.CROSS or word == "cutting":\n        return 1\n', 0),
+])
+def test_the_vocabulary_rule_sees_a_word_spelled_out_under_any_name(tmp_path, planted, caught):
+    """A copy of ``story_check.py`` (which spells out none) with a function appended comparing vocabulary words: each
+    comparison spelling one out is found on the planted lines, whatever the compared value is called; the ego's name,
+    a road, an enum member and another word are not."""
+    target = "dv2s_gym/story_check.py"
+    words = _vocabulary_words()
+    assert not vocabulary_spelled_out({target: ROOT / target}, words)
+    source = (ROOT / target).read_text(encoding="utf-8")
+    copy = tmp_path / "planted.py"
+    copy.write_text(source + "\n\n_PLANTED_ACTIONS = {'cut_in', 'merge'}\n\n\n"
+                    "def _planted(participant, other_kind_name, relation, action, rels, lane, step, x, name, road, word):\n"
+                    "    " + planted + "    return 0\n", encoding="utf-8")
+    found = vocabulary_spelled_out({target: copy}, words).get(target, [])
+    first = len(source.splitlines()) + 1
+    assert len(found) == caught and all(int(line.partition(":")[0]) > first for line in found), found
+
+
 BUILT_IN_RAISES: Dict[str, str] = {
     "dv2s_gym:__getattr__:AttributeError": "a module's __getattr__: Python's protocol (hasattr, from-imports) needs "
                                            "AttributeError for a name the module does not have",
@@ -3109,8 +3223,6 @@ REACHED_BY_NAME = {
     # Scenic scripts written for CARLA call these actions by name (the CARLA facade's interface)
     "envs.scenic_highway.carla.actions": {"unfreezeTrafficLights", "setAllIntersectionTrafficLightsStatus",
                                           "setTrafficLightStatus", "getTrafficLightStatus"},
-    # pytest calls its hooks by name
-    "dv2s_gym.regress.pytest_plugin": {"pytest_addoption", "pytest_configure", "pytest_runtest_call"},
 }
 """Public functions that nothing in the repository names because their caller finds them by name."""
 
@@ -3131,11 +3243,12 @@ PUBLIC_API = {
 
 def _unnamed_public_functions() -> Dict[str, List[str]]:
     """``{module: [name, ...]}``: top-level public functions and classes of the product that their own module does
-    not use and that no other product module, Scenic model, doc page or ``pyproject.toml`` names."""
+    not use and that no other product module, Scenic model, doc page, ``pyproject.toml`` or the pytest plugin
+    (``dv2s_pytest.py``, outside the packages) names."""
     words = {module: set(re.findall(r"\w+", path.read_text())) for module, path in _modules().items()}
     texts = [p.read_text() for package in PACKAGES for p in (ROOT / package).rglob("*.scenic")]
     texts += [p.read_text() for p in (ROOT / "docs").rglob("*.md")]
-    texts += [(ROOT / name).read_text() for name in ("README.md", "pyproject.toml")]
+    texts += [(ROOT / name).read_text() for name in ("README.md", "pyproject.toml", "dv2s_pytest.py")]
     other_words = set(re.findall(r"\w+", "\n".join(texts)))
     found: Dict[str, List[str]] = {}
     for module, path in sorted(_modules().items()):

@@ -11,7 +11,7 @@ Design (fixed before running; see bench/RESULTS.md, "DAgger beta_decay 0 in the 
   and 100 held-out episodes).  Each loop's own round 1: its starting policy, working bank, by-family split and
   held-out episodes (every held-out scenario, seeds ``EVAL_SEED_BASE + 0 .. 9``), unchanged.
 * Two new arms per loop, each by :mod:`bench.research.loop_finetune_sweep` (the loop's own scenario draw,
-  :func:`dv2s_gym.loop.run.arm_weights`): **B0-FT** (``--name ft_beta0``: the mined scenarios drawn with
+  :func:`dv2s_gym.loop.arms.arm_weights`): **B0-FT** (``--name ft_beta0``: the mined scenarios drawn with
   probability 0.5, as the loop's fine-tuned arm) and **B0-CTL** (``--name ctl_beta0 --control``: the mined
   scenarios left out, as the loop's control arm).  Both: ``--method dagger --lr 1e-3 --steps 40000
   --beta-decay 0``, every other DAgger setting its default (4 iterations, 8 epochs, SLOWER weight 3), the loop's

@@ -10,11 +10,11 @@
 Reuses the round-1 mining run, working bank and split of ``--loop`` (so settings are
 compared on the same held-out episodes; a by-family split also keeps every member of a held-out family, its
 parent scenario included, out of the fine-tuning, as the loop does: the scenario draw is the loop's own
-:func:`dv2s_gym.loop.run.arm_weights`), evaluates the starting policy on the held-out scenarios
+:func:`dv2s_gym.loop.arms.arm_weights`), evaluates the starting policy on the held-out scenarios
 once (cached in ``OUT/before.jsonl``), fine-tunes exactly as the loop does
 (``--method ppo``: :func:`policies.training.fine_tune`; ``--method dagger``:
 :func:`policies.imitation.dagger_fine_tune`; the loop's weights from
-:func:`dv2s_gym.loop.run.fine_tune_weights`, seed ``loop seed * 1000 + 1``, 2 subprocess envs),
+:func:`dv2s_gym.loop.arms.fine_tune_weights`, seed ``loop seed * 1000 + 1``, 2 subprocess envs),
 evaluates the fine-tuned policy on the same episodes (paired, the policy's own env config) and,
 with ``--regress``, regression-tests it against the starting policy on the starting bank
 (``--regress-episodes`` seeds per scenario from 10000). Prints one JSON line and appends it to
@@ -70,7 +70,7 @@ def main() -> None:
 
     from dv2s_gym.loop.heldout import HeldOutStore, evaluate_heldout, failure_types, paired_summary
     from dv2s_gym.workers.settings import WorkerSettings
-    from dv2s_gym.loop.run import arm_weights
+    from dv2s_gym.loop.arms import arm_weights
     from policies.training import EVAL_SEED_BASE, TrainConfig, fine_tune
 
     loop = Path(args.loop)

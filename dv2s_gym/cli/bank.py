@@ -11,7 +11,8 @@ from typing import Any, List
 
 from dv2s_gym.cli import bank_validate
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import WEIGHTS, WEIGHTS_EXAMPLE, json_error, json_value, open_bank, read_input_file
+from dv2s_gym.cli.inputs import (WEIGHTS, WEIGHTS_EXAMPLE, json_error, json_value, open_bank, read_input_file,
+                                  seed_value)
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_command, bank_option
 from scenario_bank.admission import ON_DUPLICATE_OF
@@ -66,7 +67,7 @@ def _add_write_commands(bank_sub) -> None:
 def _add_exchange_commands(bank_sub) -> None:
     p = bank_command(bank_sub, "sample", "draw scenarios by weight", run_sample)
     p.add_argument("--count", type=int, default=1)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_value, default=0)
     p.add_argument("--tag", help="draw among scenarios with this tag")
     p.add_argument("--weights", help='JSON object name -> weight, e.g. \'{"a": 2, "b": 1}\'')
     p = bank_command(bank_sub, "export", "write scenarios to one .tar.gz archive", run_export)

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from dv2s_gym.cli.backend_options import sg_option
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import description_text, input_file, llm_config, output_folder
+from dv2s_gym.cli.inputs import description_text, input_file, llm_config, output_folder, seed_value
 from dv2s_gym.cli.output import emit, json_text
 from dv2s_gym.cli.parser import bank_option, llm_options, video_options
 from dv2s_gym.pipeline.stages import describe, Description
@@ -41,7 +41,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--from", dest="from_file", type=input_file, help="read the description from this file (e.g. an edited description.txt)")
     sg_option(p)
     p.add_argument("--out", default="out/generated", type=output_folder, help="output folder")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_value, default=0)
     p.add_argument("--seconds", type=float, default=10.0, help="simulated seconds of the check run")
     p.add_argument("--json", action="store_true")
     llm_options(p)
@@ -58,7 +58,7 @@ def add_parser(subparsers) -> None:
                                                                "(--bank names it)")
     bank_option(p)
     p.add_argument("--jobs", type=int, default=1, help="parallel processes in batch mode")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_value, default=0)
     p.add_argument("--seconds", type=float, default=10.0)
     p.add_argument("--json", action="store_true")
     llm_options(p)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
-from dv2s_gym.cli.inputs import output_folder
+from dv2s_gym.cli.inputs import output_folder, seed_value
 from dv2s_gym.cli.output import json_text
 from scenario_bank.catalog import open_bank, unknown_bank_name
 
@@ -20,7 +20,7 @@ def add_parser(subparsers) -> None:
     demo.add_argument("--out", default="out/demo", type=output_folder, help="folder for the videos (default: out/demo)")
     demo.add_argument("--scenario", action="append", help="only this bank scenario (repeatable)")
     demo.add_argument("--episodes", type=int, default=1, help="episodes per scenario (default: 1)")
-    demo.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
+    demo.add_argument("--seed", type=seed_value, default=0, help="seed of the first episode (default: 0)")
     demo.add_argument("--duration", type=float, default=None, help="episode length in seconds")
     demo.add_argument("--json", action="store_true", help="print JSON instead of a table")
     demo.set_defaults(func=run)

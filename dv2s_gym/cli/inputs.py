@@ -17,7 +17,7 @@ from scenario_bank.safe_files import nests_deeper_than, read_regular_file, Unsaf
 
 __all__ = ["CONFIG_EXAMPLE", "WEIGHTS", "WEIGHTS_EXAMPLE", "env_config_option", "json_error", "json_option",
            "json_value", "llm_config", "open_bank", "read_input_file", "input_file", "output_file", "output_folder",
-           "description_text"]
+           "description_text", "seed_value"]
 
 
 def open_bank(args: argparse.Namespace):
@@ -127,6 +127,19 @@ def _cannot_write_in(folder: Path) -> Optional[str]:
     except OSError as error:
         return f"cannot create anything in {place} ({error.strerror or error})"
     return None
+
+
+def seed_value(text: str) -> int:
+    """``--seed``: an integer >= 0 (episodes and samplers are seeded with it); else an
+    :class:`argparse.ArgumentTypeError` naming the value and the fix."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a seed: give an integer >= 0 (e.g. --seed 0; the same "
+                                         "seed gives the same scenes)")
+    return value
 
 
 def output_folder(text: str) -> str:

@@ -8,7 +8,7 @@ import json
 from typing import TYPE_CHECKING, Any, List, Optional
 
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import json_value, output_folder
+from dv2s_gym.cli.inputs import json_value, output_folder, seed_value
 from dv2s_gym.cli.parser import bank_option
 from dv2s_gym.loop.settings import DEFAULT_PROFILE, DEFAULTS, EVIDENCE, FINE_TUNE_METHODS, PROFILES, LoopSettings
 from dv2s_gym.loop.verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
@@ -131,7 +131,7 @@ def _add_arms_and_run_arguments(p: argparse.ArgumentParser) -> None:
                                  "every later iteration (--fine-tune-method dagger only)"))
     p.add_argument("--margin", type=float, default=None,
                    help=_default("margin", "the regression test's non-inferiority margin"))
-    p.add_argument("--seed", type=int, default=None, help=_default("seed", "seed"))
+    p.add_argument("--seed", type=seed_value, default=None, help=_default("seed", "seed"))
     p.add_argument("--workers", type=int, default=None, help="processes for mining and evaluation (default: every core)")
     p.add_argument("--envs", type=int, default=LoopSettings.n_envs,
                    help=f"training environments (default {LoopSettings.n_envs})")

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from dv2s_gym.cli.backend_options import dra_option, sg_option, worker_backend_option
-from dv2s_gym.cli.inputs import env_config_option, json_option, llm_config, output_folder
+from dv2s_gym.cli.inputs import env_config_option, json_option, llm_config, output_folder, seed_value
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from dv2s_gym.cli.parser import bank_option, llm_options
 from dv2s_gym.mining.conversion.settings import ConversionSettings
@@ -67,7 +67,7 @@ def add_parser(subparsers) -> None:
                    "speeds and geometry at the failure are close to an earlier one's in the scenario counts as easy) or "
                    "cluster-novelty (a failure in a behaviour cluster already found counts as easy); "
                    "default novelty for split, state-novelty for novelty-bandit, robustness for the others")
-    p.add_argument("--seed", type=int, default=MINE.seed,
+    p.add_argument("--seed", type=seed_value, default=MINE.seed,
                    help=f"seed of the sampler and the episodes (default {MINE.seed})")
     p.add_argument("--reference", default=MINE.reference,
                    help=f"driver deciding avoidability (default {MINE.reference}; 'none' skips the check)")

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from dv2s_gym.cli.backend_options import worker_backend_option
-from dv2s_gym.cli.inputs import env_config_option, output_folder
+from dv2s_gym.cli.inputs import env_config_option, output_folder, seed_value
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from dv2s_gym.cli.output import json_text
 from dv2s_gym.cli.parser import bank_option
@@ -60,7 +60,7 @@ def add_parser(subparsers) -> None:
                    "(default 0.30: 30 points); with --power it chooses --episodes")
     p.add_argument("--power", type=float, default=None,
                    help="probability of FAIL at --mde (default 0.8)")
-    p.add_argument("--seed", type=int, default=None,
+    p.add_argument("--seed", type=seed_value, default=None,
                    help="seed of the first episode (default 0, or the baseline report's)")
     p.add_argument("--margin", type=float, default=None,
                    help="non-inferiority margin on the failure rate (default 0.02: 2 points)")

@@ -6,7 +6,7 @@ import argparse
 from typing import Any, Mapping, Optional
 
 from dv2s_gym.cli.output import json_text
-from dv2s_gym.cli.inputs import output_file
+from dv2s_gym.cli.inputs import output_file, seed_value
 from dv2s_gym.cli.parser import bank_option
 from scenario_bank.jail.output import printable
 
@@ -22,7 +22,7 @@ def add_parser(subparsers) -> None:
     bank_option(p)
     p.add_argument("--video", default="out/episode.webm", type=output_file, help="video path (.webm VP8; .mp4/.avi also work)")
     p.add_argument("--trace", default=None, help="also save the episode trace here (.json or .json.gz)")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=seed_value, default=0,
                    help="episode seed: it chooses the scene (and the actions of --random); the same seed gives the "
                    "same episode (default: 0)")
     p.add_argument("--duration", type=float, default=None, help="episode length in seconds")

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import WEIGHTS, WEIGHTS_EXAMPLE, env_config_option, json_option, json_value, output_folder
+from dv2s_gym.cli.inputs import (WEIGHTS, WEIGHTS_EXAMPLE, env_config_option, json_option, json_value, output_folder,
+                                  seed_value)
 from dv2s_gym.cli.parser import bank_option
 from dv2s_gym.progress_lines import log_line
 
@@ -24,7 +25,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scenarios", nargs="*", metavar="NAME", help="bank names or tag:<tag> (default: the whole bank)")
     p.add_argument("--steps", type=int, help="total env steps to train to, across resumes (default 100000)")
     p.add_argument("--envs", type=int, help="environments in parallel subprocesses (default 2)")
-    p.add_argument("--seed", type=int, help="seed of the model and the training episodes (default 0)")
+    p.add_argument("--seed", type=seed_value, help="seed of the model and the training episodes (default 0)")
     p.add_argument("--out", required=True, type=output_folder, help="run folder")
     p.add_argument("--sampler", choices=["uniform", "weighted", "curriculum"],
                    help="scenario of each episode: uniform (default), weighted (--weights) or curriculum "

@@ -267,7 +267,7 @@ class FinalVsStart(JsonRecord):
 
 @dataclass(frozen=True, eq=False)
 class MinedEntry(JsonRecord):
-    """One scenario a round's mining kept (:func:`dv2s_gym.loop.run.mined_entries`): its ``cluster``, the bank
+    """One scenario a round's mining kept (:func:`dv2s_gym.loop.mined.mined_entries`): its ``cluster``, the bank
     entry (``scenario``) and the failure's ``reproduction`` rate; an exact replay has ``replay`` true, its
     ``parent`` scenario and, when it leaves parameters at the parent's distribution, ``not_narrowed``
     (``{parameter: why}``). The loop gives every entry its family as ``parent`` before the split."""
@@ -380,7 +380,7 @@ class SplitRecord(JsonRecord):
 
 @dataclass(frozen=True, eq=False)
 class ReferenceGate(JsonRecord):
-    """A round's ``reference`` step (:func:`dv2s_gym.loop.run.reference_gate`): the ``reference`` driver's
+    """A round's ``reference`` step (:func:`dv2s_gym.loop.measures.reference_gate`): the ``reference`` driver's
     held-out ``episodes``, those ``kept`` and those ``excluded`` (``[scenario, seed]``: it ``failed`` or
     ``errored``), per scenario (``by_scenario``: ``{"episodes", "excluded", "failures": {type: n}}``) and the
     families whose every episode is left out (``excluded_families``)."""
@@ -469,7 +469,7 @@ class RegressComparison(JsonRecord):
 
 @dataclass(frozen=True, eq=False)
 class UntouchedComparison(JsonRecord):
-    """A round's ``untouched`` step (:func:`dv2s_gym.loop.run.evaluate_untouched`): the ``scenarios`` and
+    """A round's ``untouched`` step (:func:`dv2s_gym.loop.comparisons.evaluate_untouched`): the ``scenarios`` and
     ``seeds`` of the untouched set, each policy's measures (``policies``: ``{"start" | "fine_tuned" | "control":
     {"episodes", "errors", "failure_rate", "stall_rate", "collision_rate", "mean_speed"}}``), the fine-tuned policy
     against the start and the control against the fine-tuned one (:class:`RegressComparison`) and the episodes
@@ -584,7 +584,7 @@ class ArmFailureTypes(JsonRecord):
 
 @dataclass(frozen=True, eq=False)
 class HeldOutComparison(JsonRecord):
-    """A round's ``after`` step (:func:`dv2s_gym.loop.run.heldout_comparison`): the starting and the fine-tuned
+    """A round's ``after`` step (:func:`dv2s_gym.loop.measures.heldout_comparison`): the starting and the fine-tuned
     policy on the held-out pairs (``pairs`` tested, ``errors`` left out, the failure rates ``before`` and
     ``after``, the ``relative_drop`` with its interval over families, the paired ``table`` and McNemar p, each
     scenario's counts), the held-out counts (``heldout_scenarios``, ``heldout_families`` tested,

@@ -87,7 +87,7 @@ class LoopSettings:
     min_heldout_families: int = 3
     """Likewise below this many held-out families (the episodes of one family are near-identical scenes)."""
     untouched_seeds: int = 1
-    """Seeds per scenario of the untouched set (:data:`dv2s_gym.loop.run.UNTOUCHED_BANK`); 0 skips it."""
+    """Seeds per scenario of the untouched set (:data:`dv2s_gym.loop.comparisons.UNTOUCHED_BANK`); 0 skips it."""
     regress_episodes: int = 1
     """Seeds per starting-bank scenario in the regression test."""
     margin: float = 0.02

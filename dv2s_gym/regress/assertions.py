@@ -4,7 +4,7 @@
 returns (a :class:`~dv2s_gym.regress.records.RegressReport`, or its JSON object) with the folder it was written to; :meth:`RegressionReport.failure_message` says, in a
 few lines, why a verdict is not acceptable (which scenarios regressed, by how much, with which
 p-values, which episodes newly fail, where the report is). The pytest plugin
-(:mod:`dv2s_gym.regress.pytest_plugin`) fails tests with that message.
+(:mod:`dv2s_pytest`) fails tests with that message.
 """
 
 from __future__ import annotations
