@@ -10,8 +10,8 @@ from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
 from dv2s_gym.pipeline.sg.rules.describe import COLLISION_HINTS
 from dv2s_gym.pipeline.sg.rules.roads import MAP_ROADS
 from dv2s_gym.pipeline.sg.rules.script import Script
-from scenario_bank.elements import (ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, ActorKind, Elements, element_set,
-                                    with_undirected)
+from scenario_bank.elements import (ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, Action, ActorKind, Elements,
+                                    element_set, with_undirected)
 
 __all__ = ["check_main_event", "typed_collisions", "unbuilt_warnings", "absent_warnings", "unshown_warnings"]
 
@@ -45,11 +45,11 @@ def check_main_event(parsed: ParsedDescription, s: Script) -> None:
     entity, action = main
     kind = "ego" if entity.kind == ActorKind.EGO else entity.kind
     shown = {a for k, a in s.actions if k == kind}
-    if action == "lane_change" or action == "merge" and kind == ActorKind.EGO and s.merged_as_lane_change:
+    if action == Action.LANE_CHANGE or action == Action.MERGE and kind == ActorKind.EGO and s.merged_as_lane_change:
         placed_it = bool(shown & {"lane_change_left", "lane_change_right"})
     elif action in COLLISION_HINTS:
-        placed_it = "collide" in shown
-    elif action == "cut_in" and "swerve" in shown and "cut_in" not in shown:
+        placed_it = Action.COLLIDE in shown
+    elif action == Action.CUT_IN and Action.SWERVE in shown and Action.CUT_IN not in shown:
         placed_it = True  # a swerve toward the ego and back, built as a swerve (warned)
     else:
         placed_it = action in shown
@@ -66,7 +66,7 @@ def typed_collisions(s: Script) -> None:
     for actor in [s.frame.ego, *s.frame.actors]:
         kind = "ego" if actor.name == "ego" else actor.kind
         typed = actor.details.get("collide", {}).get("type")
-        if typed and (kind, "collide") in s.actions:
+        if typed and (kind, Action.COLLIDE) in s.actions:
             s.actions.add((kind, typed))
 
 
