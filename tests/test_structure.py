@@ -2943,7 +2943,6 @@ def vocabulary_spelled_out(files: Dict[str, Path], words: frozenset) -> Dict[str
 VOCABULARY_SPELLED_OUT: Dict[str, Tuple[int, str]] = {
     "scenario_bank/bank.py": (2, "'merge' is the --on-duplicate choice there, not the action"),
     "scenario_bank/scenic2_rules.py": (3, "'behind' is a word of Scenic's syntax there, not the relation"),
-    "envs/dv2s_env.py": (1, "the env's own lane-change event kind"),
 }
 """The modules of :data:`KINDS_BY_ENUM` whose comparisons still spell out words of the vocabularies
 (:func:`vocabulary_literals_compared`), with how many and why; every other one of them spells out none. A count only
