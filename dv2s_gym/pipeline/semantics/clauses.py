@@ -311,7 +311,7 @@ class ClauseReader:
                 and e is not subject]
         for e in same:
             for a, d in new:
-                if a.startswith("lane_change") or a in (Action.CUT_IN,):
+                if a.startswith("lane_change") or a == Action.CUT_IN:
                     e.add_action(a, **{k: v for k, v in d.items() if k not in ("side", "with")})
                 else:
                     e.add_action(a, **{k: v for k, v in d.items() if k != "with"})

@@ -78,7 +78,7 @@ class SceneCompletion:
         for e in self.out.entities:
             self._middle_lane_direction(e, ego)
             if e.kind == ActorKind.PEDESTRIAN and e.has("cross"):
-                e.actions = [(a, d) for a, d in e.actions if a not in (Action.STOP,) or d.get("keep")]
+                e.actions = [(a, d) for a, d in e.actions if a != Action.STOP or d.get("keep")]
             cut_in_side_from_relations(e)
         for e in self.out.entities:
             if e.kind == ActorKind.EGO or ego is None:

@@ -101,7 +101,7 @@ def spawn_lane_pedestrians(s: Script, actor: ActorFrame, ego_speed: str, two_way
             ",\n    with regionContainedIn everywhere"
         s.spawn += [f"{var} = new {CLASS[actor.kind]} {place},", f"    facing {facing}{contained},"] + \
             (["    with speed 0,"] if riding else []) + [f"    with behavior {behavior}"]
-    rels = ["ahead_of"] + [r for r in actor.relations if r in (Relation.CROSSING_PATH,)]
+    rels = ["ahead_of"] + [r for r in actor.relations if r == Relation.CROSSING_PATH]
     shown = [a for a in actor.actions if a in (Action.CROSS, Action.COLLIDE)]
     if not crossing and actor.has("stop"):
         shown.append("stop")
