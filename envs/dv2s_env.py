@@ -52,6 +52,7 @@ from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.scenic2 import upgrade_scenic2
 from scenario_bank.errors import MissingFileError, SettingError
+from scenario_bank.elements import Action
 from envs.rendering import DV2SViewer
 
 __all__ = ["DV2SEnv", "ScenarioRef", "check_env_config", "resolve_scenarios"]
@@ -661,7 +662,8 @@ class DV2SEnv(AbstractEnv):
             "collision": float(ego.crashed),
             "off_road": float(self._episode.get("off_road", False)),
             "high_speed": float(np.clip(hw_utils.lmap(forward, [low, high], [0, 1]), 0, 1)),
-            "lane_change": float(any(e["kind"] == "lane_change" and e["actors"] == ["ego"] for e in self._step_events)),
+            "lane_change": float(any(e["kind"] == Action.LANE_CHANGE and e["actors"] == ["ego"]
+                                     for e in self._step_events)),
             "low_ttc": float(getattr(self, "_ttc", math.inf) < self.config["ttc_threshold"]),
             "standing": float(self._standing_with_free_path(ego)) if weights_standing(self.config) else 0.0,
         }

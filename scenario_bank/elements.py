@@ -39,6 +39,7 @@ from typing import Any, Dict, FrozenSet, Iterable, List, Mapping, Optional, Tupl
 from scenario_bank.errors import DV2SError
 
 __all__ = [
+    "Road",
     "ActorKind",
     "Action",
     "Relation",
@@ -55,7 +56,23 @@ __all__ = [
     "with_undirected",
 ]
 
-ROADS = ("highway", "straight_road", "intersection", "t_junction", "three_way", "roundabout", "merge")
+
+
+class Road(StrEnum):
+    """A road type, one of :data:`ROADS` (in its order); ``str``-valued as :class:`ActorKind` is
+    (``Road.MERGE == "merge"``, the on-ramp, which is no :attr:`Action.MERGE`)."""
+
+    HIGHWAY = "highway"
+    STRAIGHT_ROAD = "straight_road"
+    INTERSECTION = "intersection"
+    T_JUNCTION = "t_junction"
+    THREE_WAY = "three_way"
+    ROUNDABOUT = "roundabout"
+    MERGE = "merge"
+
+
+ROADS = tuple(str(road) for road in Road)
+"""The road types of :class:`Road`, as plain strings."""
 
 
 class ActorKind(StrEnum):

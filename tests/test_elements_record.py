@@ -17,7 +17,8 @@ from typing import List
 
 import pytest
 
-from scenario_bank.elements import ElementError, Elements, element_set, empty_elements
+from scenario_bank.elements import (ACTIONS, PARTICIPANTS, RELATIONS, ROADS, Action, ActorKind, ElementError, Elements,
+                                    Relation, Road, element_set, empty_elements)
 from scenario_bank.records import Sidecar
 from tests.test_mining_typed_records import _key_reads
 
@@ -171,3 +172,14 @@ def test_the_product_passes_element_records_typed_and_reads_their_fields():
                          "pass scenario_bank.elements.Elements (its to_dict() is the JSON object)")
     keyed = [f"{path}: {found}" for path, source in _product_sources() for found in keyed_element_reads(source)]
     assert not keyed, f"{keyed} read an element record by string key; read its fields (elements.actions)"
+
+
+def test_the_vocabulary_tables_are_the_enums_values_as_plain_strings():
+    """``ROADS``, ``PARTICIPANTS``, ``ACTIONS`` and ``RELATIONS`` hold the values of ``Road``, ``ActorKind``, ``Action``
+    and ``Relation`` in their order, as plain strings (what the JSON and YAML files hold); a member compares and
+    hashes as its string, so code compares with the members."""
+    assert ROADS == ("highway", "straight_road", "intersection", "t_junction", "three_way", "roundabout", "merge")
+    for table, enum in ((ROADS, Road), (PARTICIPANTS, ActorKind), (ACTIONS, Action), (RELATIONS, Relation)):
+        assert table == tuple(enum) and all(type(word) is str for word in table)
+        assert {member: 1 for member in enum} == {word: 1 for word in table}
+    assert Road.MERGE == Action.MERGE == "merge" and Road.MERGE is not Action.MERGE

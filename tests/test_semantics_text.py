@@ -10,8 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from dv2s_gym.pipeline.semantics.lexicon import LANE_WORD
+from dv2s_gym.pipeline.semantics.parsed import Lane
 from dv2s_gym.pipeline.semantics.text import elements_from_text, parse_description
-from scenario_bank.elements import Elements, element_set
+from scenario_bank.elements import ActorKind, Elements, element_set
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenario_bank" / "scenarios"
@@ -169,3 +171,15 @@ def test_collision_types_from_text(text, owner, kind):
 ])
 def test_no_collision_type_from_text(text):
     assert not [a for a in elements_from_text(text).actions if a[1].startswith("collide_")]
+
+
+@pytest.mark.parametrize("text, lane", [
+    ("A car in the left lane brakes.", Lane.LEFT), ("A car in the middle lane cuts in.", Lane.MIDDLE),
+    ("A car in the right lane brakes.", Lane.RIGHT), ("A car in the adjacent lane brakes.", Lane.ADJACENT),
+    ("A truck on the on-ramp merges into the highway ahead of the ego.", Lane.RAMP),
+])
+def test_a_participant_s_lane_is_one_of_lane(text, lane):
+    """The lane the parser puts a participant in is a word of :class:`Lane`, held as a plain string."""
+    entity = next(e for e in parse_description(text).entities if e.kind != ActorKind.EGO)
+    assert entity.lane == lane and type(entity.lane) is str
+    assert set(LANE_WORD.values()) <= set(Lane)

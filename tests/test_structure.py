@@ -2943,20 +2943,6 @@ def vocabulary_spelled_out(files: Dict[str, Path], words: frozenset) -> Dict[str
 VOCABULARY_SPELLED_OUT: Dict[str, Tuple[int, str]] = {
     "scenario_bank/bank.py": (2, "'merge' is the --on-duplicate choice there, not the action"),
     "scenario_bank/scenic2_rules.py": (3, "'behind' is a word of Scenic's syntax there, not the relation"),
-    "envs/dv2s_env.py": (1, "the env's own lane-change event kind"),
-    **{path: (count, "kinds, roles, actions or relations still spelled out: to compare with their enums")
-       for path, count in {
-           "dv2s_gym/mining/conversion/interaction.py": 13, "dv2s_gym/pipeline/semantics/action_rules.py": 6,
-           "dv2s_gym/pipeline/semantics/clauses.py": 14, "dv2s_gym/pipeline/semantics/mentions.py": 6,
-           "dv2s_gym/pipeline/semantics/scene_completion.py": 16, "dv2s_gym/pipeline/semantics/trace.py": 7,
-           "dv2s_gym/pipeline/sg/rules/coverage.py": 8, "dv2s_gym/pipeline/sg/rules/describe.py": 3,
-           "dv2s_gym/pipeline/sg/rules/junction_fit.py": 1, "dv2s_gym/pipeline/sg/rules/junction_roles.py": 10,
-           "dv2s_gym/pipeline/sg/rules/junction_spawn.py": 2, "dv2s_gym/pipeline/sg/rules/junctions.py": 1,
-           "dv2s_gym/pipeline/sg/rules/kerb.py": 3, "dv2s_gym/pipeline/sg/rules/lane_roles.py": 26,
-           "dv2s_gym/pipeline/sg/rules/lane_traffic.py": 5, "dv2s_gym/pipeline/sg/rules/lane_vehicles.py": 13,
-           "dv2s_gym/pipeline/sg/rules/lanes.py": 2, "dv2s_gym/pipeline/sg/rules/manoeuvres.py": 2,
-           "dv2s_gym/pipeline/sg/rules/map_choice.py": 9, "dv2s_gym/pipeline/sg/rules/pedestrians.py": 7,
-           "dv2s_gym/pipeline/sg/rules/standing.py": 4}.items()},
 }
 """The modules of :data:`KINDS_BY_ENUM` whose comparisons still spell out words of the vocabularies
 (:func:`vocabulary_literals_compared`), with how many and why; every other one of them spells out none. A count only

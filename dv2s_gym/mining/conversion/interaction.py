@@ -28,20 +28,22 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, List, Mapping, Optional, Tuple
 
 from dv2s_gym.pipeline.semantics.trace import ego_frame, elements_from_trace, trace_actor_kind
+from scenario_bank.elements import Action, ActorKind, Elements, Relation
 from scenario_bank.failure_types import failure_type
-from scenario_bank.elements import ActorKind, Elements
 from scenario_bank.records import Failure, JsonRecord
 
 __all__ = ["MANOEUVRES", "LOOKBACK_S", "FailureInteraction", "key_actor", "actor_manoeuvres", "failure_interaction",
            "shows_interaction", "trace_shows_interaction", "interaction_sentence"]
 
-MANOEUVRES = ("cut_in", "cross", "merge", "lane_change_left", "lane_change_right", "brake", "stop", "pull_out",
-              "drift", "swerve", "turn_left", "turn_right", "u_turn", "reverse", "overtake")
+MANOEUVRES = tuple(str(action) for action in (
+    Action.CUT_IN, Action.CROSS, Action.MERGE, Action.LANE_CHANGE_LEFT, Action.LANE_CHANGE_RIGHT, Action.BRAKE,
+    Action.STOP, Action.PULL_OUT, Action.DRIFT, Action.SWERVE, Action.TURN_LEFT, Action.TURN_RIGHT, Action.U_TURN,
+    Action.REVERSE, Action.OVERTAKE))
 """The actions that make an actor's part in a failure, most telling first."""
 LOOKBACK_S = 6.0
 """Seconds before the failure searched for the actor the ego reacted to (stalls, leaving the road)."""
 _SAME_LANE_M = 2.0   # |lateral offset| [m] within which an actor is in the ego's lane
-_LANE_CHANGES = {"lane_change_left", "lane_change_right"}
+_LANE_CHANGES = frozenset({Action.LANE_CHANGE_LEFT, Action.LANE_CHANGE_RIGHT})
 
 
 def _frequency(trace) -> float:
@@ -180,7 +182,7 @@ def shows_interaction(interaction: FailureInteraction, elements: Elements) -> bo
     if kind not in elements.participants:
         return False
     actions = {action for who, action in elements.actions if who == kind}
-    if interaction.failure_type == "collision" and "collide" not in actions:
+    if interaction.failure_type == "collision" and Action.COLLIDE not in actions:
         return False
     wanted = set(interaction.manoeuvres or ())
     if not wanted:
@@ -246,29 +248,29 @@ def interaction_sentence(interaction: FailureInteraction, known: Optional[Elemen
     collided = interaction.failure_type == "collision"
     relation = {"same_lane": "same_lane", "left": "left_of", "right": "right_of"}.get(interaction.side)
     if moves and set(moves) & said or not moves and relation in placed:
-        return f"The ego vehicle collides with the {kind}." if collided and "collide" not in said else ""
+        return f"The ego vehicle collides with the {kind}." if collided and Action.COLLIDE not in said else ""
     subject = _ARTICLE.get(kind, f"A {kind}")
     gap, side = interaction.gap_m, interaction.side
     where = f" about {abs(gap):.0f} m {'ahead of' if gap >= 0 else 'behind'} the ego vehicle" if gap is not None else ""
-    if kind == ActorKind.PEDESTRIAN or "cross" in moves:
+    if kind == ActorKind.PEDESTRIAN or Action.CROSS in moves:
         text = f"{subject} crosses the road in front of the ego vehicle."
-    elif "cut_in" in moves or "merge" in moves:
+    elif Action.CUT_IN in moves or Action.MERGE in moves:
         lane = f" from the lane to the {side} of the ego vehicle" if side in ("left", "right") else ""
         text = f"{subject}{lane} cuts into the ego's lane{where}."
     elif moves and moves[0] in _LANE_CHANGES:
         direction = moves[0].rsplit("_", 1)[1]
         text = f"{subject}{where} changes lanes to the {direction}."
-    elif "brake" in moves:
-        lane = " in the ego's lane" if side == "same_lane" else ""
-        text = f"{subject}{lane}{where} suddenly brakes hard" + (" and stops." if "stop" in moves else ".")
-    elif "stop" in moves:
-        text = f"{subject} stands still in the ego's lane{where}." if side == "same_lane" else \
+    elif Action.BRAKE in moves:
+        lane = " in the ego's lane" if side == Relation.SAME_LANE else ""
+        text = f"{subject}{lane}{where} suddenly brakes hard" + (" and stops." if Action.STOP in moves else ".")
+    elif Action.STOP in moves:
+        text = f"{subject} stands still in the ego's lane{where}." if side == Relation.SAME_LANE else \
             f"{subject}{where} stands still."
-    elif side == "same_lane":
+    elif side == Relation.SAME_LANE:
         text = f"{subject} drives in the ego's lane{where}."
     else:
         text = f"{subject} drives{where} in the lane to the {side} of the ego vehicle." if side else \
             f"{subject} drives near the ego vehicle."
-    if collided and "collide" not in said:
+    if collided and Action.COLLIDE not in said:
         text += f" The ego vehicle collides with the {kind}."
     return text

@@ -7,10 +7,10 @@ import re
 from typing import Any, Dict, List, Optional, Tuple
 
 from dv2s_gym.pipeline.semantics.lexicon import COMPILED_ACTIONS, NEGATION, SUDDEN, PASSIVE_HIT, LANE_WORD
-from dv2s_gym.pipeline.semantics.parsed import Entity, drift_side
 from dv2s_gym.pipeline.semantics.mentions import Mention, action_window, crossing_direction
+from dv2s_gym.pipeline.semantics.parsed import Entity, drift_side
 from dv2s_gym.pipeline.semantics.road import distance_m, time_s
-from scenario_bank.elements import CAN_DO, ActorKind
+from scenario_bank.elements import CAN_DO, Action, ActorKind, Relation
 
 __all__ = ["ActionRules"]
 
@@ -20,7 +20,7 @@ def _conflict_partner_of(entities: List[Entity], who: Entity) -> Optional[Entity
     straight at the junction; else the first other moving actor."""
     others = [e for e in entities if e is not who and e.kind not in (ActorKind.EGO, ActorKind.OBSTACLE)]
     for e in others:
-        if any(j is who and r in ("crossing_path", "oncoming") for r, j in e.relations):
+        if any(j is who and r in (Relation.CROSSING_PATH, Relation.ONCOMING) for r, j in e.relations):
             return e
     for e in others:
         if any(e.has(a) for a in ("cross", "go_straight", "turn_left", "turn_right", "pull_out", "u_turn")):
@@ -55,8 +55,8 @@ class ActionRules:
                 if re.search(r"\bor\s+(?:\w+\s+)?$", before) or re.match(r"\s*(?:\w+\s+){0,3}or\b", clause[m.end():]):
                     spans.append((m.start(), m.end()))
                     continue  # "turns right or goes straight": neither is stated
-                if action == "cut_in" and re.search(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?$", before) \
-                        and re.match(r"\s*by\b", clause[m.end():]):
+                if action == Action.CUT_IN and re.search(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?$",
+                                                         before) and re.match(r"\s*by\b", clause[m.end():]):
                     agent = self.object_at(clause, m.end(), mentions)
                     if agent is not None:
                         owner = agent  # "the ego is cut off by a van"
@@ -182,7 +182,8 @@ class ActionRules:
         sudden = bool(SUDDEN.search(action_window(clause, m)))
         if self._static_object_acts(owner, action, clause):
             return
-        if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and owner.kind != ActorKind.PEDESTRIAN:
+        if action in (Action.LANE_CHANGE, Action.CUT_IN) and m.group(0).startswith("merg") and \
+                owner.kind != ActorKind.PEDESTRIAN:
             owner.add_action("merge", sudden=sudden)  # "merges left", "merged into its lane": the text says merge
         rule = self._ACTION_RULES.get("collide" if action.startswith("collide") else action)
         if rule is None or not rule(self, owner, action, m, clause, sudden):
@@ -192,7 +193,7 @@ class ActionRules:
         """Whether ``action`` was read onto a static object (an obstacle that does not collide, and is no animal
         crossing, emerging or stopping): then the clause is listed as not placed."""
         if owner.kind == ActorKind.OBSTACLE and not (owner.attrs.get("animal")
-                                                    and action in ("cross", "emerge", "stop")) \
+                                                    and action in (Action.CROSS, "emerge", Action.STOP)) \
                 and not action.startswith("collide"):
             if clause not in self.unplaced_phrases:
                 self.unplaced_phrases.append(clause)
@@ -242,7 +243,7 @@ class ActionRules:
             return True
         if owner.kind == ActorKind.PEDESTRIAN:
             return True
-        owner.actions = [(a, d) for a, d in owner.actions if a != "stop"]
+        owner.actions = [(a, d) for a, d in owner.actions if a != Action.STOP]
         owner.add_action("pull_out", sudden=sudden)
         if re.match(r"(?:back|revers)", m.group(0)):
             owner.add_action("reverse")
@@ -359,7 +360,7 @@ class ActionRules:
         owner.add_action("collide", sudden=sudden)
         if other is not None and not owner.detail("collide").get("with"):
             owner.detail("collide")["with"] = other
-        if action != "collide":
+        if action != Action.COLLIDE:
             owner.add_action(action)
         return True
 

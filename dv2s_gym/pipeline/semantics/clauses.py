@@ -26,10 +26,10 @@ from dv2s_gym.pipeline.semantics.lexicon import (
     SENTENCE_SPLIT,
     DETERMINER_OR_NOUN,
 )
-from dv2s_gym.pipeline.semantics.parsed import Entity, NO_JUNCTION_WORDS, ParsedDescription
 from dv2s_gym.pipeline.semantics.mentions import Mention, NOUN_RE, EGO_RE
+from dv2s_gym.pipeline.semantics.parsed import Entity, NO_JUNCTION_WORDS, ParsedDescription
 from dv2s_gym.pipeline.semantics.road import distance_m, road_features, speed_kph, strip_absences, time_s
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import Action, ActorKind, Relation, Road
 
 __all__ = ["ClauseReader"]
 
@@ -45,10 +45,10 @@ class ClauseReader:
         self.out.absent = absent
         self.out.absent_phrases = [r for r in removed if not NO_JUNCTION_WORDS.search(r)]
         for road, pattern in ROAD_PATTERNS:
-            if road == "merge" and re.search(r"\b(?:off ramp|exit ramp|offramp)\b", text) and not re.search(
+            if road == Road.MERGE and re.search(r"\b(?:off ramp|exit ramp|offramp)\b", text) and not re.search(
                     r"\b(?:on ramp|onramp|entry ramp|entrance ramp|acceleration lane)\b", text):
                 continue  # leaving the motorway: the road is the motorway
-            if road == "merge" and not ON_RAMP.search(text) and re.search(
+            if road == Road.MERGE and not ON_RAMP.search(text) and re.search(
                     r"\b(?:lanes? merg\w*|merg\w* lanes?|lane (?:ends|drop)|road narrows|merg\w* (?:in)?to one|"
                     r"zipper merge)\b", text):
                 continue  # two lanes becoming one: not an on-ramp
@@ -311,7 +311,7 @@ class ClauseReader:
                 and e is not subject]
         for e in same:
             for a, d in new:
-                if a.startswith("lane_change") or a in ("cut_in",):
+                if a.startswith("lane_change") or a == Action.CUT_IN:
                     e.add_action(a, **{k: v for k, v in d.items() if k not in ("side", "with")})
                 else:
                     e.add_action(a, **{k: v for k, v in d.items() if k != "with"})
@@ -420,13 +420,13 @@ class ClauseReader:
                 owner = self._attach(m.start(), mentions, subject, exclude=target)
                 if owner is None or owner is target:
                     continue
-                if rel == "behind" and re.search(r"\bfrom\s+$", clause[:m.start()]):
+                if rel == Relation.BEHIND and re.search(r"\bfrom\s+$", clause[:m.start()]):
                     continue  # "appears from behind a parked van": occlusion, not a position
-                if rel == "behind" and owner.kind in (ActorKind.PEDESTRIAN, ActorKind.BICYCLE) and \
+                if rel == Relation.BEHIND and owner.kind in (ActorKind.PEDESTRIAN, ActorKind.BICYCLE) and \
                         re.search(r"\b(?:hidden|concealed|obscured|occluded|hiding|waiting|standing)\s+$", clause[:m.start()]):
                     owner.attrs["from_behind"] = target  # "a pedestrian hidden behind a parked truck"
                     continue
-                if rel == "ahead_of" and m.group(0).strip() == "before":
+                if rel == Relation.AHEAD_OF and m.group(0).strip() == "before":
                     continue
                 if rel == "follow":
                     if owner.kind == ActorKind.EGO and target.kind != ActorKind.EGO:
@@ -438,36 +438,37 @@ class ClauseReader:
                     if owner.kind == ActorKind.EGO and target.kind != ActorKind.EGO:
                         self.relate(target, "ahead_of", owner)  # "the ego drives towards a stopped car"
                     continue
-                if owner.kind == ActorKind.EGO and target.kind != ActorKind.EGO and rel in ("behind", "ahead_of"):
+                if owner.kind == ActorKind.EGO and target.kind != ActorKind.EGO and \
+                        rel in (Relation.BEHIND, Relation.AHEAD_OF):
                     # "the ego drives behind a truck": the truck is ahead of the ego
-                    self.relate(target, "ahead_of" if rel == "behind" else "behind", owner)
+                    self.relate(target, "ahead_of" if rel == Relation.BEHIND else "behind", owner)
                     continue
                 self.relate(owner, rel, target)
         for rel, pattern in REL_IMPLICIT:
             for m in re.finditer(pattern, clause):
-                if rel == "oncoming":
+                if rel == Relation.ONCOMING:
                     owner = self._attach_forward(m, clause, mentions, subject)
-                elif rel in ("ahead_of", "behind") and m.group(0).startswith(("lead", "leading", "preceding",
-                                                                              "front", "following", "trailing",
-                                                                              "rear", "tailgating")):
+                elif rel in (Relation.AHEAD_OF, Relation.BEHIND) and m.group(0).startswith(
+                        ("lead", "leading", "preceding", "front", "following", "trailing", "rear", "tailgating")):
                     owner = self._attach_forward(m, clause, mentions, subject)
                 else:
                     owner = self._attach(m.start(), mentions, subject, allow_ego=False)
                 if owner is None or owner.kind == ActorKind.EGO:
                     continue
-                if rel in ("left_of", "right_of") and re.search(
+                if rel in (Relation.LEFT_OF, Relation.RIGHT_OF) and re.search(
                         r"\b(?:chang\w*|switch\w*|mov\w*|steer\w*|swerv\w*|turn\w*|veer\w*|shift\w*|lanes?|"
                         r"pull\w*|merg\w*)\s+(?:\w+\s+)?$", clause[:m.start()]) and m.group(0).startswith("to"):
                     continue
-                if rel in ("left_of", "right_of") and m.group(0).startswith("from the") and not (
+                if rel in (Relation.LEFT_OF, Relation.RIGHT_OF) and m.group(0).startswith("from the") and not (
                         owner.has("cut_in") or re.search(r"\bcut|pull|merg|swerv|mov|chang|approach|come|overt",
                                                           clause)):
                     if owner.kind == ActorKind.PEDESTRIAN and not re.search(
                             r"\bfrom the (?:left|right)(?: (?:side|kerb|curb|sidewalk|pavement))?\b", m.group(0) + clause[m.end():m.end() + 12]):
                         continue
-                if rel == "same_lane" and re.search(r"\binto\s+(?:the ego|its|our|my)", clause[max(0, m.start() - 8):m.end()]):
+                if rel == Relation.SAME_LANE and re.search(r"\binto\s+(?:the ego|its|our|my)",
+                                                           clause[max(0, m.start() - 8):m.end()]):
                     continue
-                if rel == "behind" and "from behind" in m.group(0) and owner.kind == ActorKind.PEDESTRIAN:
+                if rel == Relation.BEHIND and "from behind" in m.group(0) and owner.kind == ActorKind.PEDESTRIAN:
                     continue
                 if ego is not None:
                     self.relate(owner, rel, ego)

@@ -22,7 +22,7 @@ from dv2s_gym.pipeline.semantics.lexicon import (
     PREPOSITIONS,
 )
 from dv2s_gym.pipeline.semantics.parsed import Entity
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import Action, ActorKind, Relation
 
 __all__ = [
     "Mention",
@@ -195,7 +195,7 @@ def _state_before_noun(before: str, entity: Entity) -> None:
         entity.add_action("cross", sudden=False, directions=[])
     elif entity.kind in MOTOR and re.search(r"\b(?:crossing|cross traffic)\s+$", before):
         pending = entity.attrs.setdefault("pending_relations", [])
-        if "crossing_path" not in pending:
+        if Relation.CROSSING_PATH not in pending:
             pending.append("crossing_path")  # "a crossing vehicle" crosses the ego's path
     # adjectives of state before the noun: stopped car, parked truck, broken down car
     if entity.kind not in (ActorKind.EGO, ActorKind.OBSTACLE) and re.search(
@@ -231,7 +231,7 @@ def cut_in_side_from_relations(e: Entity) -> None:
     """A cut-in with no side said comes from the side ``e`` is on (the last of its left/right relations)."""
     if e.has("cut_in") and not e.detail("cut_in").get("side"):
         for rel, j in e.relations:
-            if rel in ("left_of", "right_of"):
+            if rel in (Relation.LEFT_OF, Relation.RIGHT_OF):
                 e.detail("cut_in")["side"] = rel.split("_")[0]
 
 
@@ -239,14 +239,14 @@ def cut_in_lane_changes(e: Entity, rels: set) -> None:
     """The lane changes a cut-in makes: a merge ahead of the ego is a cut-in; an overtake said as "passes" and
     a cut-in that is no pulling back are one cut-in; pulling back after an overtake is out and back; a cut-in
     from a side changes lanes toward the other."""
-    if e.has("merge") and "ahead_of" in rels and not e.has("cut_in"):
+    if e.has("merge") and Relation.AHEAD_OF in rels and not e.has("cut_in"):
         e.add_action("cut_in")
     if e.has("cut_in") and e.has("overtake") and e.detail("overtake").get("via_pass") \
             and not e.detail("cut_in").get("back"):
-        e.actions = [(a, d) for a, d in e.actions if a != "overtake"]
+        e.actions = [(a, d) for a, d in e.actions if a != Action.OVERTAKE]
     if e.has("cut_in"):
-        side = e.detail("cut_in").get("side") or ("left" if "left_of" in rels else
-                                                  "right" if "right_of" in rels else None)
+        side = e.detail("cut_in").get("side") or ("left" if Relation.LEFT_OF in rels else
+                                                  "right" if Relation.RIGHT_OF in rels else None)
         if e.has("overtake") and e.detail("cut_in").get("back"):
             out_side = e.detail("overtake").get("side") or "left"
             back_side = "right" if out_side == "left" else "left"

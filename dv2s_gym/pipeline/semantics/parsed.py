@@ -5,11 +5,25 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any, Dict, List, Optional, Tuple
 
 from scenario_bank.elements import ActorKind, Elements
 
-__all__ = ["Entity", "NO_JUNCTION_WORDS", "drift_side", "ParsedDescription"]
+__all__ = ["Lane", "Entity", "NO_JUNCTION_WORDS", "drift_side", "ParsedDescription"]
+
+
+class Lane(StrEnum):
+    """The lane a description puts a participant in (:attr:`Entity.lane`), relative to the road's lanes; ``str``-valued
+    as ``scenario_bank.elements.ActorKind`` is (``Lane.RAMP == "ramp"``)."""
+
+    LEFT = "left"
+    MIDDLE = "middle"
+    RIGHT = "right"
+    ADJACENT = "adjacent"
+    """A lane next to the ego's, its side not said."""
+    RAMP = "ramp"
+    """The on-ramp's acceleration lane."""
 
 
 @dataclass

@@ -6,9 +6,9 @@ from __future__ import annotations
 from typing import Optional
 
 from dv2s_gym.pipeline.semantics.lexicon import MOTOR, COLLISION_KINDS
-from dv2s_gym.pipeline.semantics.parsed import Entity
 from dv2s_gym.pipeline.semantics.mentions import cut_in_side_from_relations, cut_in_lane_changes
-from scenario_bank.elements import ActorKind
+from dv2s_gym.pipeline.semantics.parsed import Entity, Lane
+from scenario_bank.elements import Action, ActorKind, Relation
 
 __all__ = ["SceneCompletion"]
 
@@ -41,9 +41,9 @@ class SceneCompletion:
                 rels = {r for r, j in e.relations if j is other} | {r for r, j in other.relations if j is e}
                 if {e.kind, other.kind} & {"pedestrian", "bicycle", "obstacle"}:
                     kind = "collide_side"
-                elif "oncoming" in rels:
+                elif Relation.ONCOMING in rels:
                     kind = "collide_head_on"
-                elif rels & {"ahead_of", "behind", "same_lane"} and "crossing_path" not in rels:
+                elif rels & {"ahead_of", "behind", "same_lane"} and Relation.CROSSING_PATH not in rels:
                     kind = "collide_rear_end"
                 else:
                     kind = "collide_side"
@@ -78,7 +78,7 @@ class SceneCompletion:
         for e in self.out.entities:
             self._middle_lane_direction(e, ego)
             if e.kind == ActorKind.PEDESTRIAN and e.has("cross"):
-                e.actions = [(a, d) for a, d in e.actions if a not in ("stop",) or d.get("keep")]
+                e.actions = [(a, d) for a, d in e.actions if a != Action.STOP or d.get("keep")]
             cut_in_side_from_relations(e)
         for e in self.out.entities:
             if e.kind == ActorKind.EGO or ego is None:
@@ -90,11 +90,12 @@ class SceneCompletion:
             # an undirected lane change said next to a directed one adds nothing
             if e.has("lane_change") and (e.has("lane_change_left") or e.has("lane_change_right")) and \
                     not e.detail("lane_change").get("weave"):
-                e.actions = [(a, d) for a, d in e.actions if a != "lane_change"]
+                e.actions = [(a, d) for a, d in e.actions if a != Action.LANE_CHANGE]
             # "must stop" at a junction with no object: the conflict is the actor crossing, turning or oncoming
             for a, d in e.actions:
                 trig = d.get("trigger")
-                if a in ("stop", "brake") and trig and trig.get("kind") == "conflict" and trig.get("with") is None:
+                if a in (Action.STOP, Action.BRAKE) and trig and trig.get("kind") == "conflict" and \
+                        trig.get("with") is None:
                     trig["with"] = self.conflict_partner(e)
         self._absolute_lanes()
         self._occluders_ahead(ego)
@@ -117,8 +118,8 @@ class SceneCompletion:
                 direction = {"left": "right", "right": "left"}.get(e.lane or "")
                 if direction is None and ego is not None and e is not ego:
                     for rel, j in e.relations:
-                        if rel in ("left_of", "right_of") and j is ego:
-                            direction = "right" if rel == "left_of" else "left"
+                        if rel in (Relation.LEFT_OF, Relation.RIGHT_OF) and j is ego:
+                            direction = "right" if rel == Relation.LEFT_OF else "left"
                 e.actions.pop(i)
                 if direction:
                     e.add_action(f"lane_change_{direction}", **d)
@@ -132,7 +133,7 @@ class SceneCompletion:
         for rel in e.attrs.pop("pending_relations", []):
             self.relate(e, rel, ego)
         rels = {r for r, j in e.relations if j is ego}
-        if e.lane == "ramp" and not rels & {"left_of", "right_of"}:
+        if e.lane == Lane.RAMP and not rels & {"left_of", "right_of"}:
             self.relate(e, "right_of", ego)
             rels.add("right_of")
         return rels
@@ -141,15 +142,15 @@ class SceneCompletion:
         """Relations to the ego that ``e``'s kind, actions and other relations (``rels``) imply: a vehicle ahead
         and on no side is in the same lane, an obstacle in the lane is ahead, a crossing pedestrian, cyclist or
         animal is ahead and across the path, oncoming traffic crosses the path of an ego turning left."""
-        if e.kind in MOTOR and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
+        if e.kind in MOTOR and Relation.AHEAD_OF in rels and not rels & {"left_of", "right_of", "oncoming"} \
                 and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
             self.relate(e, "same_lane", ego)
-        if e.kind == ActorKind.OBSTACLE and "same_lane" in rels:
+        if e.kind == ActorKind.OBSTACLE and Relation.SAME_LANE in rels:
             self.relate(e, "ahead_of", ego)
         if (e.kind in (ActorKind.PEDESTRIAN, ActorKind.BICYCLE) or e.attrs.get("animal")) and e.has("cross"):
             self.relate(e, "ahead_of", ego)
             self.relate(e, "crossing_path", ego)
-        if e.kind in MOTOR + (ActorKind.BICYCLE,) and "oncoming" in rels and ego.has("turn_left"):
+        if e.kind in MOTOR + (ActorKind.BICYCLE,) and Relation.ONCOMING in rels and ego.has("turn_left"):
             self.relate(e, "crossing_path", ego)
 
     def _occluders_ahead(self, ego: Optional[Entity]) -> None:
@@ -161,9 +162,9 @@ class SceneCompletion:
                 continue
             self.relate(occluder, "ahead_of", ego)
             for rel, j in list(e.relations):
-                if j is ego and rel in ("left_of", "right_of"):
+                if j is ego and rel in (Relation.LEFT_OF, Relation.RIGHT_OF):
                     self.relate(occluder, rel, ego)
-            e.relations = [(r, j) for r, j in e.relations if not (r == "behind" and j is occluder)]
+            e.relations = [(r, j) for r, j in e.relations if not (r == Relation.BEHIND and j is occluder)]
 
     def _cross_traffic(self, ego: Optional[Entity]) -> None:
         """Cross traffic at a junction: a vehicle from the left or right, not oncoming, not changing lanes, not
@@ -176,12 +177,12 @@ class SceneCompletion:
                 continue
             rels = {r for r, j in e.relations if j is ego}
             lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")
-            joins = "right_of" in rels and e.has("turn_right")  # a right turn from the right joins the ego's way
-            if rels & {"left_of", "right_of"} and "oncoming" not in rels and not any(e.has(a) for a in lane_moves) \
-                    and not joins \
+            joins = Relation.RIGHT_OF in rels and e.has("turn_right")  # a right turn from the right joins the ego's way
+            if rels & {"left_of", "right_of"} and Relation.ONCOMING not in rels \
+                    and not any(e.has(a) for a in lane_moves) and not joins \
                     and (e.attrs.get("side_road") or any(e.has(a) for a in ("go_straight", "turn_left",
                                                                               "turn_right", "collide"))
                          or not e.actions):
                 self.relate(e, "crossing_path", ego)
-            if "oncoming" in rels and e.has("turn_left") and not ego.has("turn_left"):
+            if Relation.ONCOMING in rels and e.has("turn_left") and not ego.has("turn_left"):
                 self.relate(e, "crossing_path", ego)

@@ -67,7 +67,7 @@ import numpy as np
 import shapely
 from shapely.affinity import scale
 
-from scenario_bank.elements import ActorKind, Elements
+from scenario_bank.elements import Action, ActorKind, Elements, Road
 from scenario_bank.maps import MAPS_DIR
 
 __all__ = ["ego_frame", "elements_from_trace", "collision_type", "trace_actor_kind", "map_view", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
@@ -297,7 +297,7 @@ def elements_from_trace(trace) -> Elements:
     lane_changes: Dict[str, List[Dict[str, Any]]] = {}
     crashed: Dict[str, float] = {}  # actor -> time of its first collision
     for event in trace.events:
-        if event.get("kind") == "lane_change" and event.get("actors"):
+        if event.get("kind") == Action.LANE_CHANGE and event.get("actors"):
             lane_changes.setdefault(event["actors"][0], []).append(event)
         if event.get("kind") == "collision":
             for actor in event.get("actors", []):
@@ -374,16 +374,16 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     for change in changes:
         out.add("lane_change_left" if change.get("direction") == "left" else "lane_change_right")
     out |= _special_motions(track, changes)
-    if "pull_out" not in out and crashed_at is not None and _crashed_pulling_out(track, crashed_at, dt):
+    if Action.PULL_OUT not in out and crashed_at is not None and _crashed_pulling_out(track, crashed_at, dt):
         out.add("pull_out")
     turn = float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])
     windows = _drift_windows(_until_crash(track, crashed_at, dt), dt, view) if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} else []
     if windows:
         out.add("drift")
         lateral = np.array([abs(ego_frame(track[0], row)[1]) for row in track])
-        if "swerve" in out and _during(windows, float(np.argmax(lateral)) * dt, margin=0.0):
+        if Action.SWERVE in out and _during(windows, float(np.argmax(lateral)) * dt, margin=0.0):
             out.discard("swerve")  # its widest excursion is the drift: a slow drift and back is no swerve
-    if "u_turn" in out:
+    if Action.U_TURN in out:
         pass
     elif abs(turn) >= TURN_ANGLE and speed.max() > 1.0:
         out.add("turn_right" if turn > 0 else "turn_left")
@@ -392,7 +392,7 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         if not changes and travelled >= KEEP_LANE_MIN_M and _stays_in_lane(track, view):
             out.add("keep_lane")
         crashed_way = _crashed_in_junction(track, crashed_at, dt, view) if road in JUNCTION_ROADS else None
-        if road in JUNCTION_ROADS and _crosses_junction(track, view) or crashed_way == "go_straight":
+        if road in JUNCTION_ROADS and _crosses_junction(track, view) or crashed_way == Action.GO_STRAIGHT:
             out.add("go_straight")
         elif crashed_way:
             out.add(crashed_way)
@@ -545,7 +545,7 @@ def _special_motions(track: np.ndarray, changes: List[Dict[str, Any]]) -> Set[st
     if _backward_metres(track) >= REVERSE_MIN_M:
         out.add("reverse")
     net_turn = abs(float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0]))
-    if net_turn >= TURN_ANGLE or "u_turn" in out:
+    if net_turn >= TURN_ANGLE or Action.U_TURN in out:
         return out
     moving = np.flatnonzero(speed > STOP_SPEED)
     started_still = speed[0] < STOP_SPEED and moving.size > 0
@@ -653,7 +653,7 @@ def _interactions(
         after = rel[min(n - 1, step + 5)]
         if abs(after[1]) <= LANE_HALF_WIDTH and 0 < after[0] < 50:
             out.add("cut_in")
-            if road == "merge":
+            if road == Road.MERGE:
                 out.add("merge")
     if rel[0, 0] < -2 and rel[-1, 0] > 2:
         # passing it: with a lane-change event, or (into an oncoming lane, which has no event) starting in line

@@ -3,15 +3,15 @@
 
 from __future__ import annotations
 
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, FrozenSet, List, Optional, Sequence, Tuple
 
 from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
 from dv2s_gym.pipeline.sg.rules.describe import COLLISION_HINTS
 from dv2s_gym.pipeline.sg.rules.roads import MAP_ROADS
 from dv2s_gym.pipeline.sg.rules.script import Script
-from scenario_bank.elements import (ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, ActorKind, Elements, element_set,
-                                    with_undirected)
+from scenario_bank.elements import (ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, Action, ActorKind, Elements,
+                                    element_set, with_undirected)
 
 __all__ = ["check_main_event", "typed_collisions", "unbuilt_warnings", "absent_warnings", "unshown_warnings"]
 
@@ -36,6 +36,32 @@ def _main_event(parsed: ParsedDescription) -> Optional[Tuple[Entity, str]]:
     return None
 
 
+def _lane_changed(shown: FrozenSet[str], s: Script, kind: str) -> bool:
+    return bool(shown & {Action.LANE_CHANGE_LEFT, Action.LANE_CHANGE_RIGHT})
+
+
+def _merged(shown: FrozenSet[str], s: Script, kind: str) -> Optional[bool]:
+    """The ego's merge, built as a lane change, is shown by one."""
+    return _lane_changed(shown, s, kind) if kind == ActorKind.EGO and s.merged_as_lane_change else None
+
+
+def _collided(shown: FrozenSet[str], s: Script, kind: str) -> bool:
+    return Action.COLLIDE in shown
+
+
+def _swerved_for_cut_in(shown: FrozenSet[str], s: Script, kind: str) -> Optional[bool]:
+    """A swerve toward the ego and back, built as a swerve (warned), shows the cut-in."""
+    return True if Action.SWERVE in shown and Action.CUT_IN not in shown else None
+
+
+_PLACED_BY_ACTION: Dict[str, Callable[[FrozenSet[str], Script, str], Optional[bool]]] = {
+    Action.LANE_CHANGE: _lane_changed, Action.MERGE: _merged, Action.CUT_IN: _swerved_for_cut_in,
+    **{typed: _collided for typed in COLLISION_HINTS},
+}
+"""Main-event action -> whether the actions the script builds for the actor show it (``None``: the action itself
+must be among them)."""
+
+
 def check_main_event(parsed: ParsedDescription, s: Script) -> None:
     """Raise :class:`GenerationError` when the script does not show the main event (what it was composed to
     show, :attr:`Script.actions`)."""
@@ -44,14 +70,10 @@ def check_main_event(parsed: ParsedDescription, s: Script) -> None:
         return
     entity, action = main
     kind = "ego" if entity.kind == ActorKind.EGO else entity.kind
-    shown = {a for k, a in s.actions if k == kind}
-    if action == "lane_change" or action == "merge" and kind == ActorKind.EGO and s.merged_as_lane_change:
-        placed_it = bool(shown & {"lane_change_left", "lane_change_right"})
-    elif action in COLLISION_HINTS:
-        placed_it = "collide" in shown
-    elif action == "cut_in" and "swerve" in shown and "cut_in" not in shown:
-        placed_it = True  # a swerve toward the ego and back, built as a swerve (warned)
-    else:
+    shown = frozenset(a for k, a in s.actions if k == kind)
+    placed = _PLACED_BY_ACTION.get(action)
+    placed_it = placed(shown, s, kind) if placed is not None else None
+    if placed_it is None:
         placed_it = action in shown
     if not placed_it:
         noun = entity.attrs.get("noun", entity.kind) if entity.kind != ActorKind.EGO else "ego"
@@ -66,7 +88,7 @@ def typed_collisions(s: Script) -> None:
     for actor in [s.frame.ego, *s.frame.actors]:
         kind = "ego" if actor.name == "ego" else actor.kind
         typed = actor.details.get("collide", {}).get("type")
-        if typed and (kind, "collide") in s.actions:
+        if typed and (kind, Action.COLLIDE) in s.actions:
             s.actions.add((kind, typed))
 
 

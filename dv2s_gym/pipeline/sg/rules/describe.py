@@ -10,15 +10,15 @@ from dv2s_gym.pipeline.semantics.text import parse_description
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.map_choice import choose_map
 from dv2s_gym.pipeline.sg.rules.roads import PARKING_STREET
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import Action, ActorKind, Relation
 
 __all__ = ["COLLISION_HINTS", "MAX_COUNT", "build_frame"]
 
 MAX_COUNT = 4
 """The most actors of one group a script places."""
 
-COLLISION_HINTS = {"collide_rear_end": ["ahead_of", "same_lane"], "collide_head_on": ["oncoming"],
-                   "collide_side": []}
+COLLISION_HINTS = {Action.COLLIDE_REAR_END: [str(Relation.AHEAD_OF), str(Relation.SAME_LANE)],
+                   Action.COLLIDE_HEAD_ON: [str(Relation.ONCOMING)], Action.COLLIDE_SIDE: []}
 """Placement (relations to the ego) that gives a collision its geometry when the text places the actor nowhere."""
 
 
@@ -32,10 +32,10 @@ def _directed_actions(actor: ActorFrame, warnings: List[str]) -> None:
     out: List[str] = []
     for action in actor.actions:
         detail = actor.details.get(action, {})
-        if action == "lane_change":
+        if action == Action.LANE_CHANGE:
             side = detail.get("side") or detail.get("target")
             if side not in ("left", "right"):
-                side = "right" if "left_of" in actor.relations else "left"
+                side = "right" if Relation.LEFT_OF in actor.relations else "left"
             action = f"lane_change_{side}"
             actor.details.setdefault(action, dict(detail))
         elif action in COLLISION_HINTS:

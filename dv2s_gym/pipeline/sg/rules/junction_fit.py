@@ -9,6 +9,7 @@ from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.junction_roles import MANEUVER_TYPES, Maneuvers, role_condition
 from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import Relation
 
 __all__ = ["RoleSpec", "feasible", "fit_roles"]
 
@@ -63,7 +64,8 @@ def _relax(s: Script, net: Maneuvers, default_ego: Optional[str], spec: RoleSpec
     if feasible(net, default_ego, [(actor, JunctionRole.ANY, mtype)]):
         s.warnings.append(f"a {actor.kind} coming {role.replace('_', ' ')} cannot be placed on "
                           f"{frame.map} with that manoeuvre: it comes from another approach")
-        actor.relations = [r for r in actor.relations if r not in ("oncoming", "left_of", "right_of")]
+        actor.relations = [r for r in actor.relations
+                           if r not in (Relation.ONCOMING, Relation.LEFT_OF, Relation.RIGHT_OF)]
         return actor, JunctionRole.ANY, mtype
     s.warnings.append(f"a {actor.kind} with '{', '.join(actor.actions)}' cannot be placed on "
                       f"{frame.map}: it comes from another approach and drives straight or turns")

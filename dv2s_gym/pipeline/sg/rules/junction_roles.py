@@ -8,6 +8,7 @@ from typing import Any, Callable, Dict, Optional, Tuple
 
 from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
+from scenario_bank.elements import Relation
 from scenario_bank.map_cache import load_network
 from scenario_bank.maps import resolve_map
 
@@ -84,23 +85,23 @@ def junction_role(actor: ActorFrame, ego: ActorFrame, rng: random.Random) -> Tup
     """The actor's junction role and the maneuver type its actions (or crossing the ego's path) give it."""
     rels = set(actor.relations)
     mtype = next((MANEUVER_TYPES[a] for a in ("turn_left", "turn_right", "go_straight") if actor.has(a)), None)
-    if (actor.has("cross") or "crossing_path" in rels and not ego.has("turn_left")) and mtype is None:
+    if (actor.has("cross") or Relation.CROSSING_PATH in rels and not ego.has("turn_left")) and mtype is None:
         mtype = "STRAIGHT"  # across the ego's path
     if actor.has("cut_in") or actor.has("merge"):
         return JunctionRole.INTO_PATH, mtype
-    if "oncoming" in rels:
+    if Relation.ONCOMING in rels:
         return JunctionRole.ONCOMING, mtype or "STRAIGHT"
-    if "same_lane" not in rels and ("left_of" in rels or "right_of" in rels):
-        side = JunctionRole.FROM_LEFT if "left_of" in rels else JunctionRole.FROM_RIGHT
+    if Relation.SAME_LANE not in rels and (Relation.LEFT_OF in rels or Relation.RIGHT_OF in rels):
+        side = JunctionRole.FROM_LEFT if Relation.LEFT_OF in rels else JunctionRole.FROM_RIGHT
         if (side, mtype) in ((JunctionRole.FROM_RIGHT, "RIGHT_TURN"), (JunctionRole.FROM_LEFT, "LEFT_TURN")) \
                 and not ego.has("turn_left") and not ego.has("turn_right"):
             return JunctionRole.INTO_PATH, mtype  # it turns into the lane the ego drives on in
         return side, mtype
-    if "ahead_of" in rels or "same_lane" in rels:
+    if Relation.AHEAD_OF in rels or Relation.SAME_LANE in rels:
         return JunctionRole.AHEAD, mtype
-    if "behind" in rels:
+    if Relation.BEHIND in rels:
         return JunctionRole.BEHIND, mtype
-    if "crossing_path" in rels or actor.has("cross"):
+    if Relation.CROSSING_PATH in rels or actor.has("cross"):
         return JunctionRole.CROSSING, mtype or "STRAIGHT"
     if mtype == "LEFT_TURN" and not ego.has("turn_left"):
         return JunctionRole.ONCOMING, mtype

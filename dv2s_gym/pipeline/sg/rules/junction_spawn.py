@@ -11,6 +11,7 @@ from dv2s_gym.pipeline.sg.rules.junction_timing import JunctionTiming
 from dv2s_gym.pipeline.sg.rules.junction_vehicles import junction_longitudinal, spawn_circulating
 from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import Relation
 
 __all__ = ["spawn_junction_vehicle", "spawn_junction_obstacle"]
 
@@ -42,7 +43,7 @@ def spawn_junction_vehicle(s: Script, spec: RoleSpec, t: JunctionTiming, ring: b
     acts = list(actor.actions)
     if mtype and not any(MANEUVER_TYPES.get(a) == mtype for a in acts):
         acts.append({v: k for k, v in MANEUVER_TYPES.items()}[mtype])
-    if role == JunctionRole.INTO_PATH and actor.has("merge") and "ahead_of" not in rels:
+    if role == JunctionRole.INTO_PATH and actor.has("merge") and Relation.AHEAD_OF not in rels:
         rels.append("ahead_of")  # it joins the ego's road in front of the ego
     s.show(actor.kind, acts, list(dict.fromkeys(rels)), actor.count)
 
@@ -78,7 +79,7 @@ def _timed_arrival(s: Script, actor: ActorFrame, role: str, t: JunctionTiming, s
     """From another approach, timed to get to the junction when the description says."""
     along = f"-(1 + {speed} * ({_arrival(s, actor, t)}))"
     behavior = junction_longitudinal(s, actor, speed, f"{actor.name}Route", reckless)
-    if role == JunctionRole.ONCOMING and "oncoming" not in rels:
+    if role == JunctionRole.ONCOMING and Relation.ONCOMING not in rels:
         rels.append("oncoming")
     return along, behavior, speed
 

@@ -17,7 +17,7 @@ from dv2s_gym.pipeline.sg.rules.pedestrians import spawn_junction_pedestrians
 from dv2s_gym.pipeline.sg.rules.roads import RING_MAP, speed_ranges
 from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
-from scenario_bank.elements import CAN_DO, ActorKind
+from scenario_bank.elements import CAN_DO, ActorKind, Relation
 
 __all__ = ["compose_junction"]
 
@@ -77,7 +77,7 @@ def _roles(s: Script) -> List[RoleSpec]:
         # a vehicle coming from the left on a roundabout circulates past the ego's entry (not out at its arm)
         roles = [(a, r, "STRAIGHT" if r == JunctionRole.FROM_LEFT and t is None else t) for a, r, t in roles]
         # one already on the ring on the ego's left that cuts in: it passes the ego's entry just ahead of it
-        roles = [(a, JunctionRole.RING_CUT, None) if r == JunctionRole.INTO_PATH and "left_of" in a.relations
+        roles = [(a, JunctionRole.RING_CUT, None) if r == JunctionRole.INTO_PATH and Relation.LEFT_OF in a.relations
                  else (a, r, t) for a, r, t in roles]
     return roles
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import HIGHWAY_MAPS, PARKING_KERB, PARKING_STREET, at_kerb
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import Action, Relation
 
 __all__ = ["spawn_puller"]
 
@@ -33,8 +34,8 @@ def spawn_puller(s: Script, actor: ActorFrame, ego_speed: str, two_way: bool) ->
         var = n if actor.count == 1 else f"{n}_{i + 1}"
         s.spawn += at_kerb(var, CLASS[actor.kind], f"egoS + {gap} + {12 * i}", kerb,
                            f"PullOutWhenNear(egoLane.centerline, -{kerb}, {speed}, {trigger}, {back}, Range(2.2, 3.0))")
-    shown = [a for a in actor.actions if a in ("pull_out", "reverse", "collide")]
-    if "pull_out" not in shown:
+    shown = [a for a in actor.actions if a in (Action.PULL_OUT, Action.REVERSE, Action.COLLIDE)]
+    if Action.PULL_OUT not in shown:
         shown.append("pull_out")
-    rels = ["ahead_of", "right_of"] + [r for r in actor.relations if r == "crossing_path"]
+    rels = ["ahead_of", "right_of"] + [r for r in actor.relations if r == Relation.CROSSING_PATH]
     s.show(actor.kind, shown, rels, actor.count)

@@ -7,11 +7,12 @@ import re
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Optional, Tuple, Union
 
+from dv2s_gym.pipeline.semantics.parsed import Lane
 from dv2s_gym.pipeline.sg.rules.frame import VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, PARKING_STREET, SHOULDER_HIGHWAY, STREET_MAPS
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
-from scenario_bank.elements import CAN_DO, ActorKind
+from scenario_bank.elements import CAN_DO, ActorKind, Relation
 
 __all__ = ["LANE_ACTIONS", "LaneRoad", "assign_lane_roles", "lanes_needed"]
 
@@ -83,9 +84,9 @@ def _check_lane_actions(s: Script, actor: ActorFrame, road: LaneRoad) -> None:
 
 def _reconcile(s: Script, actor: ActorFrame) -> None:
     """Settle relations and actions that contradict each other."""
-    if "same_lane" in actor.relations and "oncoming" in actor.relations and "ahead_of" in actor.relations:
+    if {Relation.SAME_LANE, Relation.ONCOMING, Relation.AHEAD_OF} <= set(actor.relations):
         # in the ego's lane and oncoming at once: the lane says where it is (a car parked in the ego's lane)
-        actor.relations = [r for r in actor.relations if r != "oncoming"]
+        actor.relations = [r for r in actor.relations if r != Relation.ONCOMING]
         s.warnings.append(f"the {actor.kind} is both in the ego's lane and oncoming: placed in the ego's lane")
     if actor.has("swerve") and actor.has("cut_in"):
         # it swerves toward the ego and returns: no cut-in happens
@@ -106,7 +107,8 @@ class _Asked:
 
 def _obstacle_role(q: _Asked) -> Role:
     two_way, rels = q.road.two_way, q.rels
-    q.actor.side = 1 if "left_of" in rels and not two_way else -1 if "right_of" in rels and not two_way else 0
+    q.actor.side = 1 if Relation.LEFT_OF in rels and not two_way else \
+        -1 if Relation.RIGHT_OF in rels and not two_way else 0
     return Role.OBSTACLE
 
 
@@ -121,15 +123,15 @@ def _beside(q: _Asked) -> bool:
     """Said to be left or right of the ego, or in a lane the text names that is not the ego's (in "the right
     lane", the ego's lane not said: beside the ego on that side)."""
     actor, ego, two_way, rels = q.actor, q.s.frame.ego, q.road.two_way, q.rels
-    return "left_of" in rels or "right_of" in rels or actor.lane == "adjacent" and not two_way or \
+    return Relation.LEFT_OF in rels or Relation.RIGHT_OF in rels or actor.lane == Lane.ADJACENT and not two_way or \
         actor.lane in ("left", "right", "middle") and \
         ego.lane in ("left", "right", "middle") and actor.lane != ego.lane or \
-        actor.lane in ("left", "right") and ego.lane is None and not two_way and "same_lane" not in rels
+        actor.lane in ("left", "right") and ego.lane is None and not two_way and Relation.SAME_LANE not in rels
 
 
 def _rams_from_behind(q: _Asked) -> bool:
     actor = q.actor
-    return actor.has("collide") and "ahead_of" not in q.rels and not actor.has("brake") and not actor.has("stop")
+    return actor.has("collide") and Relation.AHEAD_OF not in q.rels and not actor.has("brake") and not actor.has("stop")
 
 
 _ROLE_RULES: Tuple[Tuple[Callable[[_Asked], bool], Union[Role, Callable[[_Asked], Role]]], ...] = (
@@ -140,13 +142,13 @@ _ROLE_RULES: Tuple[Tuple[Callable[[_Asked], bool], Union[Role, Callable[[_Asked]
     # parked at the kerb (or on the shoulder) beside the ego's lane
     (lambda q: q.actor.has("pull_out") or q.actor.has("reverse"), Role.PULLER),
     (lambda q: q.actor.has("merge") and q.road.onramp, Role.RAMP),
-    (lambda q: q.actor.has("drift") or "oncoming" in q.rels,
+    (lambda q: q.actor.has("drift") or Relation.ONCOMING in q.rels,
      lambda q: _drifting_or_oncoming_role(q.s, q.actor, q.road, set(q.rels))),
     (lambda q: q.actor.has("overtake") and not q.actor.details.get("overtake", {}).get("around"), Role.OVERTAKER),
     (lambda q: q.actor.has("cut_in") or (q.actor.has("merge") and not q.road.onramp), Role.CUTTER),
     (_slow_lead, Role.SLOW_LEAD),
     (_beside, Role.ADJACENT),
-    (lambda q: "behind" in q.rels, Role.FOLLOWER),
+    (lambda q: Relation.BEHIND in q.rels, Role.FOLLOWER),
     (_rams_from_behind, Role.FOLLOWER),
 )
 """The straight road's role rules, in order: (condition, role or the function that settles it); the first whose
@@ -163,15 +165,15 @@ def _first_role(s: Script, actor: ActorFrame, road: LaneRoad, rels: set) -> Role
 
 
 def _drifting_or_oncoming_role(s: Script, actor: ActorFrame, road: LaneRoad, rels: set) -> Role:
-    if road.two_way or road.multilane and "oncoming" in rels:
+    if road.two_way or road.multilane and Relation.ONCOMING in rels:
         return Role.ONCOMING
-    if "oncoming" in rels:
+    if Relation.ONCOMING in rels:
         s.warnings.append(f"an oncoming {actor.kind} cannot be placed on a one-way {s.frame.map}: it is "
                           "placed in the next lane instead")
-        actor.relations = [r for r in actor.relations if r != "oncoming"]
+        actor.relations = [r for r in actor.relations if r != Relation.ONCOMING]
     ego = s.frame.ego
-    right = "right_of" in rels or actor.lane == "right" and ego.lane in (None, "middle", "left")
-    actor.side = -1 if right and "left_of" not in rels else 1
+    right = Relation.RIGHT_OF in rels or actor.lane == "right" and ego.lane in (None, "middle", "left")
+    actor.side = -1 if right and Relation.LEFT_OF not in rels else 1
     return Role.ADJACENT
 
 
@@ -189,9 +191,9 @@ def _adjust_role(s: Script, actor: ActorFrame, road: LaneRoad, standing: Optiona
             not (set(actor.actions) - {"stop", "keep_lane"}) and not ({"oncoming", "left_of"} & rels):
         # a parked car (or a row of them) on the street with parking lanes: at the ego's kerb, not in its lane
         actor.role = Role.FAR_SIDE
-        actor.relations = [r for r in actor.relations if r != "same_lane"] + ["right_of"]
+        actor.relations = [r for r in actor.relations if r != Relation.SAME_LANE] + ["right_of"]
     if road.on_shoulder and actor.role in (Role.LEAD, Role.FOLLOWER) and actor.kind in VEHICLES and \
-            "left_of" not in actor.relations:
+            Relation.LEFT_OF not in actor.relations:
         actor.relations.append("left_of")  # in the lane left of the ego parked on the shoulder
     if two_way and actor.role == Role.ADJACENT and not (set(actor.actions) - {"stop", "keep_lane"}):
         actor.role = Role.FAR_SIDE  # parked or standing at the far kerb, in the other lane
@@ -238,9 +240,9 @@ def _set_side(s: Script, actor: ActorFrame, road: LaneRoad) -> None:
                 actor.side = max(-1, min(1, actor.side))
         elif actor.lane in ("left", "right") and ego.lane is None:
             actor.side = order[actor.lane]
-        elif "left_of" in rels:
+        elif Relation.LEFT_OF in rels:
             actor.side = 1
-        elif "right_of" in rels:
+        elif Relation.RIGHT_OF in rels:
             actor.side = -1
         else:
             actor.side = 1
@@ -264,10 +266,10 @@ def _set_cutter_side(s: Script, actor: ActorFrame, rels: set) -> None:
             not (rels & {"left_of", "right_of"}):
         side = actor.lane  # "in the left lane", the ego's lane not said: it comes from that side
     if side is None:
-        side = "left" if "left_of" in rels else "right" if "right_of" in rels else \
+        side = "left" if Relation.LEFT_OF in rels else "right" if Relation.RIGHT_OF in rels else \
             ("right" if actor.kind == ActorKind.TRUCK else s.rng.choice(["left", "right"]))
     actor.side = 1 if side == "left" else -1
-    if "left_of" not in rels and "right_of" not in rels:
+    if Relation.LEFT_OF not in rels and Relation.RIGHT_OF not in rels:
         actor.relations.append(f"{side}_of")
 
 

@@ -10,6 +10,7 @@ from dv2s_gym.pipeline.sg.rules.manoeuvres import longitudinal_behavior
 from dv2s_gym.pipeline.sg.rules.placement import Placement
 from dv2s_gym.pipeline.sg.rules.roads import HIGHWAY_MAPS
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import Relation
 
 __all__ = ["place_adjacent", "place_follower", "place_lead", "place_slow_lead"]
 
@@ -27,7 +28,7 @@ def place_lead(s: Script, actor: ActorFrame, ctx: LaneContext, p: Placement) -> 
                       f"Range(1.6, 2.2), {ego_speed})")
     else:
         _drive_on(s, actor, p)
-    if "ahead_of" not in actor.relations:
+    if Relation.AHEAD_OF not in actor.relations:
         p.relations.append("ahead_of")
 
 
@@ -49,7 +50,7 @@ def place_follower(s: Script, actor: ActorFrame, ctx: LaneContext, p: Placement)
         p.behavior = f"Cruise({p.speed})"
     else:
         _drive_on(s, actor, p)
-    if "behind" not in actor.relations:
+    if Relation.BEHIND not in actor.relations:
         p.relations.append("behind")
 
 
@@ -60,14 +61,14 @@ def place_slow_lead(s: Script, actor: ActorFrame, ctx: LaneContext, p: Placement
     p.speed = f"{p.speed} - " + s.param(f"{n}_speed_deficit", "Range(6, 9)" if not urban else "Range(4, 6)")
     _in_lane(actor, ctx, p, 0, gap)
     _drive_on(s, actor, p)
-    if "ahead_of" not in p.relations:
+    if Relation.AHEAD_OF not in p.relations:
         p.relations.append("ahead_of")
 
 
 def place_adjacent(s: Script, actor: ActorFrame, ctx: LaneContext, p: Placement) -> None:
     """A vehicle in the lane beside the ego's (``actor.side``): side by side, or a little ahead when it changes
     lanes, so the two never collide unless it is meant to."""
-    ahead, behind = "ahead_of" in p.relations, "behind" in p.relations
+    ahead, behind = Relation.AHEAD_OF in p.relations, Relation.BEHIND in p.relations
     changing = actor.has("lane_change_left") or actor.has("lane_change_right")
     offset = s.param(f"{actor.name}_offset", "Range(12, 28)" if ahead else "-Range(12, 28)" if behind
                      else ("Range(0, 2.5)" if actor.has("collide") else "Range(9, 14)") if changing

@@ -8,7 +8,7 @@ from dv2s_gym.pipeline.sg.rules.lane_context import LaneContext
 from dv2s_gym.pipeline.sg.rules.manoeuvres import longitudinal_behavior
 from dv2s_gym.pipeline.sg.rules.placement import Placement
 from dv2s_gym.pipeline.sg.rules.script import Script
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import Action, ActorKind, Relation
 
 __all__ = ["place_ramp", "place_oncoming", "place_cutter", "place_overtaker"]
 
@@ -26,11 +26,11 @@ def place_ramp(s: Script, actor: ActorFrame, ctx: LaneContext, p: Placement) -> 
         p.speed = f"{ego_speed} - " + s.param(f"{n}_speed_deficit", "Range(5, 8)")
     delay = "Range(0.8, 1.5)" if speeding else "Range(0.3, 1.0)"
     p.behavior = f"MergeFromRamp({target}, accelLane, {delay}, Range(1.8, 2.6))"
-    p.relations = [r for r in p.relations if r not in ("left_of", "right_of")]
-    if "ahead_of" not in p.relations:
+    p.relations = [r for r in p.relations if r not in (Relation.LEFT_OF, Relation.RIGHT_OF)]
+    if Relation.AHEAD_OF not in p.relations:
         p.relations.append("ahead_of")
-    p.actions = [a for a in p.actions if a in ("merge", "cut_in", "accelerate", "brake")]
-    if "cut_in" not in p.actions:
+    p.actions = [a for a in p.actions if a in (Action.MERGE, Action.CUT_IN, Action.ACCELERATE, Action.BRAKE)]
+    if Action.CUT_IN not in p.actions:
         p.actions.append("merge")
 
 
@@ -51,7 +51,7 @@ def place_oncoming(s: Script, actor: ActorFrame, ctx: LaneContext, p: Placement)
                       f"Range(22, 32), Range(1.2, 2.0))")
     else:
         p.behavior = longitudinal_behavior(s, actor, p.speed)
-    if "oncoming" not in p.relations:
+    if Relation.ONCOMING not in p.relations:
         p.relations.append("oncoming")
 
 
@@ -59,14 +59,14 @@ def place_cutter(s: Script, actor: ActorFrame, ctx: LaneContext, p: Placement) -
     """From the lane at its side into the ego's lane ahead of the ego: a slow truck pulls in when the ego comes
     close, anything else overtakes a little and cuts in."""
     lane = ctx.lane_of(actor.side)
-    if actor.kind == ActorKind.TRUCK and not actor.has("accelerate") and "behind" not in p.relations:
+    if actor.kind == ActorKind.TRUCK and not actor.has("accelerate") and Relation.BEHIND not in p.relations:
         _truck_pulls_in(s, actor, lane, p)
     else:
         _cuts_in(s, actor, lane, p)
     # it changes lanes toward the ego (from the left: to the right)
-    p.actions = [a for a in p.actions if a not in ("lane_change_left", "lane_change_right")]
+    p.actions = [a for a in p.actions if a not in (Action.LANE_CHANGE_LEFT, Action.LANE_CHANGE_RIGHT)]
     p.actions.append("lane_change_right" if actor.side > 0 else "lane_change_left")
-    if "cut_in" not in p.actions:
+    if Action.CUT_IN not in p.actions:
         p.actions.append("cut_in")
 
 
@@ -82,7 +82,7 @@ def _truck_pulls_in(s: Script, actor: ActorFrame, lane: str, p: Placement) -> No
 
 def _cuts_in(s: Script, actor: ActorFrame, lane: str, p: Placement) -> None:
     n, side, ego_speed = actor.name, actor.side, p.speed
-    behind = "behind" in p.relations or actor.has("overtake")
+    behind = Relation.BEHIND in p.relations or actor.has("overtake")
     start = s.param(f"{n}_start", "Range(-14, -8)" if behind else
                     "Range(-3, 0)" if actor.has("collide") else "Range(7, 11)")
     hits = actor.has("collide")  # it cuts in beside the ego's front and makes contact
@@ -96,7 +96,7 @@ def _cuts_in(s: Script, actor: ActorFrame, lane: str, p: Placement) -> None:
     p.position = f"{lane}.centerline.pointAlongBy(egoS + {start})"
     s.use("CutInWhenAhead")
     p.behavior = f"CutInWhenAhead({-side}, {p.speed}, {gap}, {dur}, {after})"
-    if not behind and "ahead_of" not in p.relations:
+    if not behind and Relation.AHEAD_OF not in p.relations:
         p.relations.append("ahead_of")
 
 
@@ -113,6 +113,6 @@ def place_overtaker(s: Script, actor: ActorFrame, ctx: LaneContext, p: Placement
     p.behavior = (f"OvertakeAndReturn(ego, {actor.side}, {p.speed}, Range(22, 28), {ret}, Range(1.8, 2.4), "
                   f"{after})")
     rels = p.relations
-    p.relations = [r for r in rels if r != "ahead_of"] + (["behind"] if "behind" not in rels else [])
-    if "same_lane" not in p.relations:
+    p.relations = [r for r in rels if r != Relation.AHEAD_OF] + (["behind"] if Relation.BEHIND not in rels else [])
+    if Relation.SAME_LANE not in p.relations:
         p.relations.append("same_lane")

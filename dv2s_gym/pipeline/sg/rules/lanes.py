@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import List
 
+from dv2s_gym.pipeline.semantics.parsed import Lane
 from dv2s_gym.pipeline.sg.rules.frame import VEHICLES, ActorFrame
 from dv2s_gym.pipeline.sg.rules.lane_context import LaneContext
 from dv2s_gym.pipeline.sg.rules.lane_ego import ego_lane_behavior
@@ -12,6 +13,7 @@ from dv2s_gym.pipeline.sg.rules.lane_roles import LANE_ACTIONS, LaneRoad, assign
 from dv2s_gym.pipeline.sg.rules.lane_spawn import spawn_lane_actor
 from dv2s_gym.pipeline.sg.rules.roads import PARKING_KERB, PARKING_STREET, SHOULDER_KERB, at_kerb, speed_ranges
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
+from scenario_bank.elements import Action
 
 __all__ = ["compose_lanes"]
 
@@ -53,7 +55,7 @@ def _ego_actions(s: Script, road: LaneRoad) -> None:
         s.warnings.append("the ego's merge without an on-ramp is built as a lane change into the next lane")
         s.merged_as_lane_change = True
     check_actions(ego, s, LANE_ACTIONS - {"cross", "merge"} | ({"merge"} if road.onramp else set()))
-    if ego.has("go_straight") and "keep_lane" not in ego.actions:
+    if ego.has("go_straight") and Action.KEEP_LANE not in ego.actions:
         ego.actions.append("keep_lane")
 
 
@@ -61,7 +63,7 @@ def _split_pairs(actors: List[ActorFrame], road: LaneRoad) -> None:
     """"two other cars drive in the neighbouring lanes": one on each side."""
     split: List[ActorFrame] = []
     for actor in actors:
-        if actor.lane == "adjacent" and actor.count >= 2 and not road.two_way and actor.kind in VEHICLES:
+        if actor.lane == Lane.ADJACENT and actor.count >= 2 and not road.two_way and actor.kind in VEHICLES:
             other = ActorFrame(name=f"{actor.name}b", kind=actor.kind, count=actor.count // 2,
                                actions=list(actor.actions), details=dict(actor.details),
                                relations=list(actor.relations), lane="adjacent", sudden=actor.sudden, side=-1)

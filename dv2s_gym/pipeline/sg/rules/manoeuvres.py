@@ -9,7 +9,7 @@ from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import HIGHWAY_MAPS
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import ActorKind, Relation
 
 __all__ = ["u_turn", "swerve", "drift", "longitudinal_behavior"]
 
@@ -30,7 +30,8 @@ def swerve(s: Script, speed: str, actor: Optional[ActorFrame] = None) -> str:
     detail = actor.details.get("swerve", {}) if actor is not None else {}
     side = detail.get("side") or detail.get("target")
     if side not in ("left", "right") and actor is not None:
-        side = "left" if "right_of" in actor.relations else "right" if "left_of" in actor.relations else None
+        side = "left" if Relation.RIGHT_OF in actor.relations else \
+            "right" if Relation.LEFT_OF in actor.relations else None
     sign = "-" if side == "right" else ""
     fast = s.frame.map in HIGHWAY_MAPS
     depth = f"{sign}Range(1.1, 1.3)" if fast else f"{sign}Range(1.2, 1.5)"

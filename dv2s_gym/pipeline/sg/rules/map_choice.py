@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from typing import List, Optional, Sequence
 
+from dv2s_gym.pipeline.semantics.parsed import Lane
 from dv2s_gym.pipeline.sg.rules.frame import VEHICLES, ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, ROAD_MAPS
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import Action, ActorKind, Relation
 
 __all__ = ["choose_map"]
 
@@ -20,8 +21,8 @@ def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -
         if a.has("cut_in") or a.has("lane_change_left") or a.has("lane_change_right"):
             return True
         static = not (set(a.actions) - {"stop", "keep_lane"}) or a.has("pull_out") or a.has("reverse")
-        if ("left_of" in a.relations or "right_of" in a.relations) and "oncoming" not in a.relations \
-                and not a.has("drift") and not static:
+        if (Relation.LEFT_OF in a.relations or Relation.RIGHT_OF in a.relations) \
+                and Relation.ONCOMING not in a.relations and not a.has("drift") and not static:
             return True
     return False
 
@@ -33,9 +34,9 @@ def _needs_three_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -> bool:
         return True
     sides = set()
     for a in actors:
-        if a.kind in VEHICLES and "oncoming" not in a.relations:
-            sides.update(r for r in a.relations if r in ("left_of", "right_of"))
-            if a.lane == "adjacent" and a.count >= 2:
+        if a.kind in VEHICLES and Relation.ONCOMING not in a.relations:
+            sides.update(r for r in a.relations if r in (Relation.LEFT_OF, Relation.RIGHT_OF))
+            if a.lane == Lane.ADJACENT and a.count >= 2:
                 sides.update(("left_of", "right_of"))
     return len(sides) == 2
 
@@ -55,7 +56,7 @@ def choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFrame
         if chosen in ("highway_straight", "urban_two_way") and turns:
             warnings.append(f"turns were described on a {road.replace('_', ' ')}, which has no junction: "
                             "the turns are not placed")
-        if chosen == "highway_straight" and "merge" in all_actions:
+        if chosen == "highway_straight" and Action.MERGE in all_actions:
             warnings.append("a merge was described on a highway without an on-ramp: using the highway with an "
                             "on-ramp (highway_onramp)")
             return "highway_onramp"
@@ -63,13 +64,13 @@ def choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFrame
     # no road type said: infer from what happens
     if turns or any(a.kind in VEHICLES and a.has("cross") for a in actors):
         return "urban_crossroads"  # a vehicle crossing the ego's path comes from a crossing road
-    if "merge" in all_actions:
+    if Action.MERGE in all_actions:
         return "highway_onramp"
     if any(a.kind == ActorKind.PEDESTRIAN for a in actors):
         if not _needs_same_direction_lanes(ego, actors):
             return "urban_two_way"
         return "highway_straight" if _needs_three_lanes(ego, actors) else MULTILANE_STREET
-    if any("oncoming" in a.relations or a.has("drift") for a in actors):
+    if any(Relation.ONCOMING in a.relations or a.has("drift") for a in actors):
         return "urban_two_way"
     if any(a.has("pull_out") or a.has("reverse") or a.has("u_turn") for a in [ego, *actors]):
         return "urban_two_way"  # out of a parking space or driveway, a turn round: a street

@@ -10,7 +10,7 @@ from dv2s_gym.pipeline.sg.rules.frame import CLASS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, PARKING_STREET, STREET_LANES
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import Action, ActorKind, Relation
 
 __all__ = ["crossing_directions", "spawn_lane_pedestrians", "spawn_junction_pedestrians"]
 
@@ -35,7 +35,7 @@ def crossing_directions(actor: ActorFrame, rng: random.Random) -> List[str]:
         hidden = actor.details.get("cross", {}).get("from_behind")
         if hidden is not None:
             sides += [r for r, other in getattr(hidden, "relations", []) if getattr(other, "kind", "") == ActorKind.EGO]
-        said = "right_to_left" if "right_of" in sides else "left_to_right" if "left_of" in sides else None
+        said = "right_to_left" if Relation.RIGHT_OF in sides else "left_to_right" if Relation.LEFT_OF in sides else None
         default = out[-1] if out else said or rng.choice(["right_to_left", "left_to_right"])
         out += [default] * remaining
     return out[:actor.count]
@@ -101,12 +101,12 @@ def spawn_lane_pedestrians(s: Script, actor: ActorFrame, ego_speed: str, two_way
             ",\n    with regionContainedIn everywhere"
         s.spawn += [f"{var} = new {CLASS[actor.kind]} {place},", f"    facing {facing}{contained},"] + \
             (["    with speed 0,"] if riding else []) + [f"    with behavior {behavior}"]
-    rels = ["ahead_of"] + [r for r in actor.relations if r in ("crossing_path",)]
-    shown = [a for a in actor.actions if a in ("cross", "collide")]
+    rels = ["ahead_of"] + [r for r in actor.relations if r == Relation.CROSSING_PATH]
+    shown = [a for a in actor.actions if a in (Action.CROSS, Action.COLLIDE)]
     if not crossing and actor.has("stop"):
         shown.append("stop")
-    s.show(actor.kind, shown, rels if ("ahead_of" in actor.relations or crossing) else
-           [r for r in actor.relations if r == "ahead_of"], actor.count)
+    s.show(actor.kind, shown, rels if (Relation.AHEAD_OF in actor.relations or crossing) else
+           [r for r in actor.relations if r == Relation.AHEAD_OF], actor.count)
 
 
 def spawn_junction_pedestrians(s: Script, actor: ActorFrame, map_name: str, reckless: bool) -> None:
@@ -140,4 +140,4 @@ def spawn_junction_pedestrians(s: Script, actor: ActorFrame, map_name: str, reck
             jitter = "" if i == 0 else " + Range(-0.4, 0.4)"
             behavior = f"CrossWhenEgoNear({walk}, {trigger}{jitter})"
         s.spawn += [f"{var} = new Pedestrian {place},", f"    facing {facing},", f"    with behavior {behavior}"]
-    s.show("pedestrian", [a for a in actor.actions if a in ("cross", "collide")], ["ahead_of"], actor.count)
+    s.show("pedestrian", [a for a in actor.actions if a in (Action.CROSS, Action.COLLIDE)], ["ahead_of"], actor.count)

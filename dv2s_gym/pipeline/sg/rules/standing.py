@@ -8,6 +8,7 @@ from dv2s_gym.pipeline.sg.rules.lane_context import LaneContext
 from dv2s_gym.pipeline.sg.rules.roads import HIGHWAY_MAPS, PARKING_FAR_KERB, PARKING_KERB, PARKING_STREET, \
     SHOULDER_KERB, at_kerb
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import Action, Relation
 
 __all__ = ["spawn_obstacle", "spawn_shoulder", "spawn_far_side"]
 
@@ -24,7 +25,7 @@ def spawn_obstacle(s: Script, actor: ActorFrame, ctx: LaneContext, speed: str) -
                     "    with width Range(0.8, 1.8), with length Range(0.6, 1.4)"]
         ctx.obstacles.append(var)
     rel = ["ahead_of"] + (["same_lane"] if actor.side == 0 else ["left_of" if actor.side > 0 else "right_of"])
-    s.show("obstacle", [], [r for r in rel if r in actor.relations or r == "ahead_of"], actor.count)
+    s.show("obstacle", [], [r for r in rel if r in actor.relations or r == Relation.AHEAD_OF], actor.count)
 
 
 def spawn_shoulder(s: Script, actor: ActorFrame, ctx: LaneContext, speed: str) -> None:
@@ -35,7 +36,7 @@ def spawn_shoulder(s: Script, actor: ActorFrame, ctx: LaneContext, speed: str) -
         var = n if actor.count == 1 else f"{n}_{i + 1}"
         s.spawn += at_kerb(var, CLASS[actor.kind], f"egoS + {gap} + {14 * i}", SHOULDER_KERB, "HoldStill()")
     s.use("HoldStill")
-    s.show(actor.kind, [a for a in actor.actions if a == "stop"], ["ahead_of", "right_of"], actor.count)
+    s.show(actor.kind, [a for a in actor.actions if a == Action.STOP], ["ahead_of", "right_of"], actor.count)
 
 
 def spawn_far_side(s: Script, actor: ActorFrame, ctx: LaneContext, speed: str) -> None:
@@ -43,7 +44,7 @@ def spawn_far_side(s: Script, actor: ActorFrame, ctx: LaneContext, speed: str) -
     n = actor.name
     cls = CLASS[actor.kind]
     gap = s.param(f"{n}_gap", "Range(25, 40)")
-    near = "right_of" in actor.relations  # parked at the ego's own (right) kerb
+    near = Relation.RIGHT_OF in actor.relations  # parked at the ego's own (right) kerb
     for i in range(actor.count):
         var = n if actor.count == 1 else f"{n}_{i + 1}"
         parking = s.frame.map == PARKING_STREET  # on the parking lane at either kerb
@@ -57,5 +58,5 @@ def spawn_far_side(s: Script, actor: ActorFrame, ctx: LaneContext, speed: str) -
                     f"{var} = new {cls} {place}",
                     "    with speed 0,", "    with behavior HoldStill()"]
     s.use("HoldStill")
-    s.show(actor.kind, [a for a in actor.actions if a == "stop"], ["ahead_of", "right_of" if near else "left_of"],
+    s.show(actor.kind, [a for a in actor.actions if a == Action.STOP], ["ahead_of", "right_of" if near else "left_of"],
            actor.count)
