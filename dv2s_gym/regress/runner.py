@@ -40,7 +40,8 @@ from dv2s_gym.regress.report import (
     paired_tables,
 )
 from dv2s_gym.regress.outputs import write_reports
-from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, code_identity, installed_version,
+from policies.run_identity import (CODE_IDENTITY, DETECTOR_READS, RESUME_FINGERPRINT, code_identity, detector_reads,
+                                   installed_version,
                                    report_code_identity,
                                    resume_fingerprint)
 from dv2s_gym.regress.store import BASELINE_FINGERPRINT, RunStore
@@ -262,7 +263,8 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     report_settings["power"] = float(settings.power if settings.power is not None else power_plan.DEFAULT_POWER)
     report = build_report(bank=plan.bank, settings=report_settings, candidate=plan.candidate_info,
                           baseline=plan.baseline_info, episodes=episodes.paired(ran.seeds),
-                          stopped_early=ran.stopped_early, sequential=ran.sequential, code_identity=plan.judged_by)
+                          stopped_early=ran.stopped_early, sequential=ran.sequential,
+                          code_identity={**plan.judged_by, DETECTOR_READS: detector_reads(plan.failure, ran.reads)})
     report = report.replace(hostname=socket.gethostname(),
                             timing={name: round(value, 3) for name, value in episodes.timing.items()},
                             duration=round(time.time() - started, 3))
@@ -474,6 +476,7 @@ def _execute(plan: _Plan, settings: RegressSettings, workers: WorkerSettings, ep
         episodes.store.close()
         if runner is not None:
             runner.close()
+    ran.reads = list((getattr(runner, "files_read", None) or {}).values())
     return ran
 
 
@@ -485,6 +488,8 @@ class _Ran:
     seeds: List[int]
     stopped_early: bool = False
     sequential: Optional[SequentialOutcome] = None
+    reads: List[Any] = dataclasses.field(default_factory=list)
+    """The user's files the workers read (:attr:`dv2s_gym.workers.pool.LocalBackend.files_read`)."""
 
 
 def _run_sequential(plan: _Plan, settings: RegressSettings, runner: Any, episodes: _Episodes,
