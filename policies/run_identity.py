@@ -45,7 +45,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional
 
 from policies.registry import (SB3_ALGORITHMS, SHIPPED_CHECKPOINT, parse_spec, registered_policies,
                                registered_policy_module)
-from scenario_bank.atomic import file_sha256
+from scenario_bank.atomic import atomic_write_json, file_sha256
 from scenario_bank.failure_types import plugin_table
 from scenario_bank.named_registry import replaced_built_ins
 from scenario_bank.plugins import MAIN, code_modules
@@ -56,7 +56,7 @@ __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "c
            "checkpoint_path", "installed_version", "MAX_HELPER_FILES", "CODE_IDENTITY", "dv2s_sources_sha256",
            "code_identity", "check_code_unchanged", "module_fingerprint", "detector_identity",
            "report_code_identity", "BUILT_IN", "read_facts", "run_read_facts", "with_recorded_reads",
-           "DETECTOR_READS", "detector_reads", "changed_files"]
+           "DETECTOR_READS", "detector_reads", "changed_files", "ReadsRecorder"]
 
 MAX_HELPER_FILES = 500
 """At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
@@ -392,6 +392,33 @@ def run_read_facts(exclude: Iterable[Any] = (), reads: Iterable[ReadFile] = (),
             found.setdefault(read.path, read)
     return read_facts(found.values(), covered=[key for key in covered if _USER_FILE.match(key)
                                                or _MODULE_SOURCE.match(key)])
+
+
+class ReadsRecorder:
+    """Adds the user's files a pool's workers read (``pool.files_read``, :mod:`dv2s_gym.workers.pool`) to the code
+    identity a run recorded in the JSON file ``record`` (under :data:`CODE_IDENTITY`, inside the objects ``where``
+    names), as new ones appear, so that a resume checks them too; files under a folder of ``exclude`` are left out."""
+
+    def __init__(self, record: Path, pool: Any, exclude: Iterable[Any] = (), where: Iterable[str] = ()) -> None:
+        self.record_file, self.pool, self.exclude, self.where = Path(record), pool, list(exclude), list(where)
+        self.count = -1
+
+    def record(self) -> None:
+        """Record the files read since the last call (at once when there are none: the common case)."""
+        reads = getattr(self.pool, "files_read", None) or {}
+        if len(reads) == self.count:
+            return
+        self.count = len(reads)
+        values = json.loads(self.record_file.read_text())
+        holder = values
+        for key in self.where:
+            holder = holder[key]
+        identity = dict(holder.get(CODE_IDENTITY) or {})
+        new = {key: value for key, value in run_read_facts(self.exclude, reads.values(), covered=identity).items()
+               if key not in identity}
+        if new:
+            holder[CODE_IDENTITY] = {**identity, **new}
+            atomic_write_json(self.record_file, values)
 
 
 def _code_group(key: str) -> str:

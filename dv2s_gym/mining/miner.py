@@ -81,12 +81,12 @@ from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, JsonRecord, RecordError
 from scenario_bank.failure_types import failure_table
 from scenario_bank.jail import JailUnavailableError, require_jail
-from scenario_bank.run_paths import as_read, record_paths, resume_fix
+from scenario_bank.run_paths import as_read, loop_folder, record_paths, resume_fix
 from scenario_bank.run_identity import (BANK_IDENTITY, bank_identity, check_bank_unchanged, check_format,
                                        check_identity, check_run_kind, record_format)
 from policies.registry import load_policy
 from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, check_code_unchanged, check_policy_unchanged,
-                                   code_identity, resume_fingerprint, run_read_facts, with_recorded_reads)
+                                   code_identity, resume_fingerprint, ReadsRecorder, with_recorded_reads)
 
 __all__ = ["MineRun", "MineSettings", "RunOrigin", "WorkerSettings", "FEEDBACKS", "mine", "read_records",
            "episode_seed", "SETTINGS_VERSION", "progress_bar"]
@@ -246,7 +246,7 @@ class _Recorder:
     the progress bar (failures and distinct clusters)."""
 
     def __init__(self, appender: JsonlAppender, done: Dict[int, EpisodeRecord], sampler: str, out: Path, bar,
-                 reads: Optional["_Reads"] = None) -> None:
+                 reads: Optional[ReadsRecorder] = None) -> None:
         self.appender, self.done, self.sampler, self.out, self.bar = appender, done, sampler, out, bar
         self.reads = reads
         counted = [r for r in done.values() if r.failed]
@@ -270,29 +270,6 @@ class _Recorder:
             self.bar.set_postfix(failures=self.failed, clusters=len(self.found))
 
 
-class _Reads:
-    """Adds the user's files the workers read to the run's recorded code identity (``settings.json``) as they appear
-    (:func:`~policies.run_identity.run_read_facts`), so a resume checks them too."""
-
-    def __init__(self, out: Path, pool: Any, exclude: Sequence[Any]) -> None:
-        self.out, self.pool, self.exclude = out, pool, list(exclude)
-        self.count = -1
-
-    def record(self) -> None:
-        reads = getattr(self.pool, "files_read", None) or {}
-        if len(reads) == self.count:  # nothing new: the common case, at once
-            return
-        self.count = len(reads)
-        path = self.out / SETTINGS_FILE
-        values = json.loads(path.read_text())
-        identity = dict(values.get(CODE_IDENTITY) or {})
-        new = {key: value for key, value in run_read_facts(self.exclude, reads.values(), covered=identity).items()
-               if key not in identity}
-        if new:
-            values[CODE_IDENTITY] = {**identity, **new}
-            atomic_write_json(path, values)
-
-
 def _recorded(policy: str, settings: MineSettings, scenarios: Sequence[str],
               space_description: Dict[str, Any], out: Optional[Path] = None) -> Dict[str, Any]:
     """The run's ``settings.json``: :meth:`MineSettings.recorded` (with the run's resolved batch and bank) with the
@@ -312,8 +289,9 @@ def _recorded(policy: str, settings: MineSettings, scenarios: Sequence[str],
 
 
 def _own_folders(out: Optional[Path], settings: MineSettings) -> List[Any]:
-    """The folders whose files are the run's own, not code it runs: the run folder and the bank."""
-    return [folder for folder in (out, settings.bank_dir) if folder]
+    """The folders whose files are the run's own, not code it runs: the run folder (and the ``dv2s loop`` folder
+    holding it: the policy a round fine-tuned is fingerprinted as the policy) and the bank."""
+    return [folder for folder in (out, loop_folder(out) if out else None, settings.bank_dir) if folder]
 
 
 SELECTION = "selection"
@@ -758,7 +736,8 @@ def _run_episodes(mining: _Mining, done: Dict[int, EpisodeRecord], workers: Work
     try:
         with pool:
             recorder = _Recorder(appender, done, mining.settings.sampler, mining.out, bar,
-                                 _Reads(mining.out, pool, _own_folders(mining.out, mining.settings)))
+                                 ReadsRecorder(mining.out / SETTINGS_FILE, pool,
+                                               _own_folders(mining.out, mining.settings)))
             if window is not None:
                 _run_window(mining, window, pool, recorder)
             else:
