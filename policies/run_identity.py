@@ -200,13 +200,13 @@ def _search_folders() -> List[Path]:
 
 
 def _file_label(path: Path) -> str:
-    """How a user's file is named in an identity: relative to the first :func:`_search_folders` folder holding it
+    """How a user's file is named in an identity: relative to the nearest :func:`_search_folders` folder holding it
     (the same name after the folder holding the plug-ins moves, with the Python path), else by its absolute path."""
     path = Path(path).resolve()
-    for folder in _search_folders():
-        if folder in path.parents:
-            return path.relative_to(folder).as_posix()
-    return str(path)
+    holding = [folder for folder in _search_folders() if folder in path.parents]
+    if not holding:
+        return str(path)
+    return path.relative_to(max(holding, key=lambda folder: len(folder.parts))).as_posix()  # the nearest one
 
 
 def _module_by_name(name: str) -> Optional[Path]:
