@@ -6,8 +6,9 @@ worker (``forkserver`` context where available, else ``spawn``; ``OMP_NUM_THREAD
 the registered function of every task it gets and keeping its envs and policies between
 tasks. Before its first task, each worker imports the plug-in modules of the process that started it
 (:func:`~dv2s_gym.workers.tasks.worker_plugins`: a plug-in's failure type and detector register there too); a
-worker that cannot import one stops the run with a :class:`WorkerError` naming the module. With each result a worker sends the user's files it has read since its last one
-(:func:`scenario_bank.read_files.unsent_reads`), kept in :attr:`LocalBackend.files_read`. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
+worker that cannot import one stops the run with a :class:`WorkerError` naming the module. With each result a
+worker sends the user's files it has read since its last one (:func:`scenario_bank.read_files.unsent_reads`), kept
+in :attr:`LocalBackend.files_read`. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
 result within the per-episode timeout is killed and replaced; its task is retried once
 (``retries``), then reported as an error result ``{"error": ..., "id", "role", ...}`` -
 never silently dropped; a task that finishes on a retry carries ``"worker_restarts"``, the
@@ -43,8 +44,10 @@ _PRELOAD = ("dv2s_gym.workers.pool", "envs.dv2s_env", "policies.evaluation")
 
 
 def _worker_main(connection, plugins: List[str]) -> None:
-    """A pool process: import the ``plugins`` modules, then receive ``(index, function, task)``, send ``(index,
-    result)``; ``None`` stops it. A plug-in that cannot be imported is sent as ``(_CANNOT_START, message)``."""
+    """A pool process: watch what it reads, import the ``plugins`` modules, then receive ``(index, function,
+    task)``, send ``(index, result, reads)`` (``reads``: the user's files read since the last result,
+    :func:`scenario_bank.read_files.unsent_reads`, as tuples); ``None`` stops it. A plug-in that cannot be imported
+    is sent as ``(_CANNOT_START, message)``."""
     os.environ["OMP_NUM_THREADS"] = "1"
     try:
         import envs.dv2s_env  # noqa: F401  (the slow imports happen before the first episode's clock starts)

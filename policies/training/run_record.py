@@ -17,7 +17,7 @@ from scenario_bank.bank import Bank
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.run_identity import (BANK_IDENTITY, RunIdentityError, bank_identity, check_bank_unchanged,
                                         check_format, check_identity, check_run_kind, record_format)
-from scenario_bank.run_paths import as_read, read_paths, record_paths, resume_fix
+from scenario_bank.run_paths import as_read, loop_folder, read_paths, record_paths, resume_fix
 
 __all__ = [
     "new_run_record",
@@ -40,10 +40,12 @@ refused on resume)."""
 
 def new_run_record(config: TrainConfig, names: Sequence[str]) -> Dict[str, Any]:
     """A new run's ``run.json``: its format, its settings, the scripts of its scenarios ``names``
-    (:func:`~scenario_bank.run_identity.bank_identity`), the code (:func:`~policies.run_identity.code_identity`) and
-    no segment yet."""
+    (:func:`~scenario_bank.run_identity.bank_identity`), the code (:func:`~policies.run_identity.code_identity`: the
+    files read in the run folder, the ``dv2s loop`` folder holding it and the bank are the run's own, not code) and no
+    segment yet."""
     return {**record_format(_RUN_SCHEMA, _RUN_VERSION), "config": config.to_json(),
-            BANK_IDENTITY: bank_identity(Bank(config.bank_dir), names), CODE_IDENTITY: code_identity(), "segments": []}
+            BANK_IDENTITY: bank_identity(Bank(config.bank_dir), names),
+            CODE_IDENTITY: code_identity(exclude=[config.out, loop_folder(config.out), config.bank_dir]), "segments": []}
 
 
 def write_run_record(path: Path, record: Mapping[str, Any]) -> None:
