@@ -28,7 +28,13 @@ an edited editable install is noticed), the plug-in modules loaded in this proce
 every registered failure type, detector and policy, and those that registered a sampler or a DRA/SG backend,
 :func:`scenario_bank.plugins.code_modules`; a registration in ``__main__`` by the script's file, when it has one)
 with the fingerprints of their source (as a ``module:attribute`` policy's), what they registered (failure type or
-detector name -> module) and the built-in entries they replaced.
+detector name -> module), the built-in entries they replaced, and the user's files the code read
+(:mod:`scenario_bank.read_files`: modules imported and data files opened, in this process and, added as the run goes
+by :class:`ReadsRecorder`, in its workers; :func:`read_facts`). A user's file is named so that moving the folder
+holding it with the Python path keeps its name: a module by its module name, a file by its path relative to the
+nearest folder on the Python path (or the working folder) holding it, by its absolute path only outside them all.
+A report of ``dv2s regress`` records, per failure kind it judged, the files that kind's plug-in read
+(:func:`detector_reads`), which ``--baseline-report`` compares with the files here (:func:`changed_files`).
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ from typing import Dict, Iterable, Iterator, List, Optional, Set, Tuple
 from scenario_bank.atomic import file_sha256
 from scenario_bank.cache import cache_dir
 
-__all__ = ["ReadFile", "watch", "is_watching", "reading_for", "user_reads", "unsent_reads", "detector_label",
+__all__ = ["ReadFile", "watch", "reading_for", "user_reads", "unsent_reads", "detector_label",
            "plugin_label", "DV2S_ROOT", "DV2S_PACKAGES", "python_roots", "python_path_folders", "SYSTEM_FOLDERS"]
 
 DV2S_ROOT = Path(__file__).resolve().parents[1]
@@ -100,11 +100,6 @@ def watch() -> None:
     if not _installed:
         sys.addaudithook(_hook)
         _installed = True
-
-
-def is_watching() -> bool:
-    """Whether :func:`watch` was called in this process."""
-    return _installed
 
 
 def detector_label(kind: str) -> str:
