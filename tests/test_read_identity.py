@@ -190,3 +190,33 @@ def test_a_recorded_user_file_is_found_again_relative_to_the_python_path(tmp_pat
     (new / "limits.json").write_text('{"speed": 1}', encoding="utf-8")
     assert run_identity.changed_files(recorded) == [
         f"{key}: recorded {recorded[key][:12]}, now {run_identity.file_sha256(new / 'limits.json')[:12]}"]
+
+
+def test_the_files_a_pools_workers_read_are_added_to_the_runs_record_as_they_appear(tmp_path, monkeypatch):
+    folder, run = tmp_path / "plugs", tmp_path / "run"
+    folder.mkdir()
+    run.mkdir()
+    monkeypatch.syspath_prepend(str(folder))
+    (folder / "limits.json").write_text("{}", encoding="utf-8")
+    (run / "own.json").write_text("{}", encoding="utf-8")
+    record = run / "run.json"
+    record.write_text(json.dumps({"settings": {"code_identity": {"dv2s sources (SHA-256)": "x"}}}), encoding="utf-8")
+
+    class Pool:
+        files_read = {}
+
+    recorder = run_identity.ReadsRecorder(record, Pool, exclude=[run], where=["settings"])
+    for path in (folder / "limits.json", run / "own.json"):
+        Pool.files_read[str(path)] = read_files.ReadFile(str(path), None, run_identity.file_sha256(path),
+                                                         ("detector probe",))
+    recorder.record()
+    identity = json.loads(record.read_text())["settings"]["code_identity"]
+    assert identity["user file limits.json (SHA-256)"] == run_identity.file_sha256(folder / "limits.json")
+    assert identity["dv2s sources (SHA-256)"] == "x" and not any("own.json" in key for key in identity)
+    written = record.stat().st_mtime_ns
+    recorder.record()  # nothing new: the record is not written again
+    assert record.stat().st_mtime_ns == written
+    (folder / "limits.json").write_text('{"speed": 1}', encoding="utf-8")
+    with pytest.raises(ValueError, match=r"files the code read differ: user file limits\.json \(SHA-256\): run has "):
+        run_identity.check_code_unchanged({"code_identity": identity}, run="run holds a run", error=ValueError,
+                                          now={"dv2s sources (SHA-256)": "x"})
