@@ -67,6 +67,7 @@ def _plugins(base: Path, road: str) -> Path:
     what the detector counts."""
     (base / "plugins").mkdir(parents=True)
     (base / "lib").mkdir()
+    (base / "plugins" / "units.py").write_text("KMH = 3.6\n", encoding="utf-8")  # a .py file beside the plug-in
     if road == "limits":
         (base / "plugins" / "myfail.py").write_text(LIMITS_PLUGIN, encoding="utf-8")
         (base / "plugins" / "limits.json").write_text('{"speed": 20.0}', encoding="utf-8")
@@ -126,7 +127,8 @@ def test_an_unchanged_rerun_resumes_and_so_does_one_whose_plugin_folders_moved(t
     assert moved.returncode == 0, moved.stderr[-2000:]
     assert len((tmp_path / "run" / "episodes.jsonl").read_text().splitlines()) == 4
     recorded = json.loads((tmp_path / "run" / "settings.json").read_text())["code_identity"]
-    assert FACT["helper"] in recorded and not any(str(tmp_path) in key for key in recorded)
+    assert FACT["helper"] in recorded and "module file units.py (SHA-256)" in recorded
+    assert not any(str(tmp_path) in key for key in recorded)
     _edit(tmp_path / "moved" / "lib" / "speedhelp.py")  # moved, then changed: still refused
     assert _mine(tmp_path / "moved", tmp_path, 5).returncode == 2
 
