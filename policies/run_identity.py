@@ -28,7 +28,13 @@ an edited editable install is noticed), the plug-in modules loaded in this proce
 every registered failure type, detector and policy, and those that registered a sampler or a DRA/SG backend,
 :func:`scenario_bank.plugins.code_modules`; a registration in ``__main__`` by the script's file, when it has one)
 with the fingerprints of their source (as a ``module:attribute`` policy's), what they registered (failure type or
-detector name -> module) and the built-in entries they replaced.
+detector name -> module), the built-in entries they replaced, and the user's files the code read
+(:mod:`scenario_bank.read_files`: modules imported and data files opened, in this process and, added as the run goes
+by :class:`ReadsRecorder`, in its workers; :func:`read_facts`). A user's file is named so that moving the folder
+holding it with the Python path keeps its name: a module by its module name, a file by its path relative to the
+nearest folder on the Python path (or the working folder) holding it, by its absolute path only outside them all.
+A report of ``dv2s regress`` records, per failure kind it judged, the files that kind's plug-in read
+(:func:`detector_reads`), which ``--baseline-report`` compares with the files here (:func:`changed_files`).
 """
 
 from __future__ import annotations
@@ -45,16 +51,18 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional
 
 from policies.registry import (SB3_ALGORITHMS, SHIPPED_CHECKPOINT, parse_spec, registered_policies,
                                registered_policy_module)
-from scenario_bank.atomic import file_sha256
+from scenario_bank.atomic import atomic_write_json, file_sha256
 from scenario_bank.failure_types import plugin_table
 from scenario_bank.named_registry import replaced_built_ins
 from scenario_bank.plugins import MAIN, code_modules
+from scenario_bank.read_files import ReadFile, detector_label, plugin_label, python_path_folders, user_reads, watch
 from scenario_bank.run_paths import resume_fix
 
 __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "check_policy_unchanged",
            "checkpoint_path", "installed_version", "MAX_HELPER_FILES", "CODE_IDENTITY", "dv2s_sources_sha256",
            "code_identity", "check_code_unchanged", "module_fingerprint", "detector_identity",
-           "report_code_identity", "BUILT_IN"]
+           "report_code_identity", "BUILT_IN", "read_facts", "run_read_facts", "with_recorded_reads",
+           "DETECTOR_READS", "detector_reads", "changed_files", "ReadsRecorder"]
 
 MAX_HELPER_FILES = 500
 """At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
@@ -187,8 +195,90 @@ def module_fingerprint(module: str) -> Dict[str, str]:
     if found is not None:
         for helper in _helper_files(found, module):
             if helper != found.resolve():
-                facts[f"module file {helper} (SHA-256)"] = file_sha256(helper)
+                facts[f"module file {_file_label(helper)} (SHA-256)"] = file_sha256(helper)
     return facts
+
+
+def _search_folders() -> List[Path]:
+    """Where a user's file recorded by a relative path is looked for: the Python path's folders (not Python's own),
+    then the working folder."""
+    return python_path_folders() + [Path.cwd().resolve()]
+
+
+def _file_label(path: Path) -> str:
+    """How a user's file is named in an identity: relative to the nearest :func:`_search_folders` folder holding it
+    (the same name after the folder holding the plug-ins moves, with the Python path), else by its absolute path."""
+    path = Path(path).resolve()
+    holding = [folder for folder in _search_folders() if folder in path.parents]
+    if not holding:
+        return str(path)
+    return path.relative_to(max(holding, key=lambda folder: len(folder.parts))).as_posix()  # the nearest one
+
+
+def _module_by_name(name: str) -> Optional[Path]:
+    """The source file module ``name`` has on the Python path (or in the working folder), found without importing
+    anything."""
+    parts = name.split(".")
+    for folder in _search_folders():
+        base = folder.joinpath(*parts)
+        for path in (base.with_suffix(".py"), base / "__init__.py"):
+            if path.is_file():
+                return path.resolve()
+    return None
+
+
+def _found_file(key: str) -> Optional[Path]:
+    """The file a user-file fact (:data:`_USER_FILE`) names, as it is found here now (``None``: not found)."""
+    match = _USER_FILE.match(key)
+    if match is None:
+        return None
+    label = match["path"]
+    if match["kind"] == "user module":
+        return _module_by_name(label)
+    if Path(label).is_absolute():
+        return Path(label) if Path(label).is_file() else None
+    return next((folder / label for folder in _search_folders() if (folder / label).is_file()), None)
+
+
+_MODULE_SOURCE = re.compile(r"^module (?P<name>\S+) source \(SHA-256\)$")
+
+
+def _covered_file(key: str) -> Optional[Path]:
+    """The file a fact of an identity names (a user file, or a plug-in module's source), ``None`` for another fact."""
+    match = _MODULE_SOURCE.match(key)
+    if match is not None:
+        found = _module_file(match["name"])
+        return found.resolve() if found is not None else None
+    found = _found_file(key)
+    return found.resolve() if found is not None else None
+
+
+def _read_key(read: ReadFile) -> str:
+    """The fact naming a file a run read: ``user module <name>`` for a module found by its name, else ``user file
+    <path>`` (:func:`_file_label`)."""
+    if read.module and read.module != MAIN and _module_by_name(read.module) == Path(read.path):
+        return f"user module {read.module} (SHA-256)"
+    return f"user file {_file_label(Path(read.path))} (SHA-256)"
+
+
+def read_facts(reads: Iterable[ReadFile], covered: Iterable[str] = ()) -> Dict[str, str]:
+    """``{fact: SHA-256}`` of the user's files a run read (:func:`scenario_bank.read_files.user_reads`), each named
+    so that moving the folder holding it (with the Python path) keeps its name: a module by its name
+    (``user module myplugins.helper``), a data file by its path relative to the Python path's folder holding it
+    (``user file limits.json``), else by its absolute path. A file the facts ``covered`` already name is left out."""
+    seen = {path for path in (_covered_file(key) for key in covered) if path is not None}
+    return {_read_key(read): read.sha256 for read in sorted(reads, key=lambda r: r.path)
+            if Path(read.path) not in seen}
+
+
+def with_recorded_reads(recorded: Mapping[str, Any], now: Mapping[str, Any]) -> Dict[str, Any]:
+    """``now`` (an identity about to be recorded again) with the user files ``recorded`` holds and ``now`` does not
+    (files read by the workers of an earlier part of the run; checked unchanged by :func:`check_code_unchanged`)."""
+    merged = dict(now)
+    for key, value in recorded.items():
+        if _USER_FILE.match(key) and key not in merged:
+            merged[key] = value
+    return merged
 
 
 def fingerprint_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[str]:
@@ -201,8 +291,9 @@ def fingerprint_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[s
             if recorded.get(key) != now.get(key)]
 
 
-_USER_FILE = re.compile(r"^module file (?P<path>.+) \(SHA-256\)$")
-"""A fact naming one of the user's files (:func:`module_fingerprint`), compared as the run recorded it."""
+_USER_FILE = re.compile(r"^(?P<kind>module file|user file|user module) (?P<path>.+) \(SHA-256\)$")
+"""A fact naming one of the user's files (:func:`module_fingerprint`, :func:`read_facts`), compared as the run
+recorded it."""
 
 
 def _as_recorded(recorded: Mapping[str, Any], now: Mapping[str, Any]) -> Dict[str, Any]:
@@ -210,10 +301,9 @@ def _as_recorded(recorded: Mapping[str, Any], now: Mapping[str, Any]) -> Dict[st
     it is now (``"missing"`` when gone), a file the run did not record left out (module docstring)."""
     facts = {key: value for key, value in now.items() if key in recorded or not _USER_FILE.match(key)}
     for key in recorded:
-        match = _USER_FILE.match(key)
-        if match and key not in now:
-            path = Path(match["path"])
-            facts[key] = file_sha256(path) if path.is_file() else "missing"
+        if _USER_FILE.match(key) and key not in now:
+            path = _found_file(key)
+            facts[key] = file_sha256(path) if path is not None else "missing"
     return facts
 
 
@@ -249,7 +339,7 @@ CODE_IDENTITY = "code_identity"
 """The key under which a resumable run's record holds :func:`code_identity`."""
 
 _CODE_GROUPS = (("dv2s sources", "dv2s sources"), ("plug-in modules", "plug-in modules"),
-                ("module ", "plug-in modules' source"), ("failure types", "failure types"),
+                ("module ", "plug-in modules' source"), ("user ", "files the code read"), ("failure types", "failure types"),
                 ("detectors", "detectors"), ("replaced built-ins", "replaced built-ins"))
 """How a difference is named in a refusal: the first group whose prefix a fact's key starts with."""
 
@@ -278,18 +368,63 @@ def dv2s_sources_sha256() -> str:
     return digest.hexdigest()
 
 
-def code_identity() -> Dict[str, Any]:
+def code_identity(exclude: Iterable[Any] = (), reads: Iterable[ReadFile] = ()) -> Dict[str, Any]:
     """What a resumed run must find unchanged in the code it runs, ``{description: value}`` (module docstring):
     ``"dv2s sources (SHA-256)"``, ``"plug-in modules"`` (:func:`~scenario_bank.plugins.code_modules`) with each
-    one's :func:`module_fingerprint`, ``"failure types"`` and ``"detectors"`` registered by plug-ins (name -> module) and
-    ``"replaced built-ins"`` (:func:`scenario_bank.named_registry.replaced_built_ins`)."""
+    one's :func:`module_fingerprint`, ``"failure types"`` and ``"detectors"`` registered by plug-ins (name -> module),
+    ``"replaced built-ins"`` (:func:`scenario_bank.named_registry.replaced_built_ins`) and the user's files read so
+    far (:func:`read_facts`) by this process and by the workers (``reads``), but those under a folder of
+    ``exclude`` (the run's own folder, its bank). Starts watching what this process reads
+    (:func:`scenario_bank.read_files.watch`)."""
+    watch()
     modules = code_modules()
     facts: Dict[str, Any] = {"dv2s sources (SHA-256)": dv2s_sources_sha256(), "plug-in modules": modules}
     for module in modules:
         facts.update(module_fingerprint(module))
     facts.update(plugin_table())
     facts["replaced built-ins"] = replaced_built_ins()
+    facts.update(run_read_facts(exclude, reads, covered=facts))
     return facts
+
+
+def run_read_facts(exclude: Iterable[Any] = (), reads: Iterable[ReadFile] = (),
+                   covered: Iterable[str] = ()) -> Dict[str, str]:
+    """:func:`read_facts` of the files this process read and of ``reads`` (a pool's, read by its workers), but those
+    under a folder of ``exclude``."""
+    excluded = [Path(folder).resolve() for folder in exclude if folder]
+    found = dict(user_reads(excluded))
+    for read in reads:
+        if not any(folder == Path(read.path) or folder in Path(read.path).parents for folder in excluded):
+            found.setdefault(read.path, read)
+    return read_facts(found.values(), covered=[key for key in covered if _USER_FILE.match(key)
+                                               or _MODULE_SOURCE.match(key)])
+
+
+class ReadsRecorder:
+    """Adds the user's files a pool's workers read (``pool.files_read``, :mod:`dv2s_gym.workers.pool`) to the code
+    identity a run recorded in the JSON file ``record`` (under :data:`CODE_IDENTITY`, inside the objects ``where``
+    names), as new ones appear, so that a resume checks them too; files under a folder of ``exclude`` are left out."""
+
+    def __init__(self, record: Path, pool: Any, exclude: Iterable[Any] = (), where: Iterable[str] = ()) -> None:
+        self.record_file, self.pool, self.exclude, self.where = Path(record), pool, list(exclude), list(where)
+        self.count = -1
+
+    def record(self) -> None:
+        """Record the files read since the last call (at once when there are none: the common case)."""
+        reads = getattr(self.pool, "files_read", None) or {}
+        if len(reads) == self.count:
+            return
+        self.count = len(reads)
+        values = json.loads(self.record_file.read_text())
+        holder = values
+        for key in self.where:
+            holder = holder[key]
+        identity = dict(holder.get(CODE_IDENTITY) or {})
+        new = {key: value for key, value in run_read_facts(self.exclude, reads.values(), covered=identity).items()
+               if key not in identity}
+        if new:
+            holder[CODE_IDENTITY] = {**identity, **new}
+            atomic_write_json(self.record_file, values)
 
 
 def _code_group(key: str) -> str:
@@ -315,7 +450,8 @@ def check_code_unchanged(recorded: Mapping[str, Any], *, run: str, error: type,
                        [g for _, g in _CODE_GROUPS] else len(_CODE_GROUPS))
         shown = "; ".join(changes[:3]) + (f"; and {len(changes) - 3} more" if len(changes) > 3 else "")
         raise error(f"{run} made with other code ({', '.join(parts)} differ: {shown}); restore the code the run "
-                    "used (dv2s's sources, the plug-in modules DV2S_PLUGINS names), or start a new --out folder")
+                    "used (dv2s's sources, the plug-in modules DV2S_PLUGINS names, the files they read), or start a "
+                    "new --out folder")
     return current
 
 
@@ -343,10 +479,48 @@ def detector_identity(kinds: Iterable[str]) -> Dict[str, Dict[str, Any]]:
     return found
 
 
-def report_code_identity(kinds: Iterable[str]) -> Dict[str, Any]:
+def report_code_identity(kinds: Iterable[str], reads: Iterable[ReadFile] = ()) -> Dict[str, Any]:
     """The code a report's episodes were judged by, for a report to record: ``"dv2s sources (SHA-256)"``, the
     ``"plug-in modules"`` loaded (module -> SHA-256 of its source), the ``"detectors"`` of the failure ``kinds``
-    judged (:func:`detector_identity`) and the ``"replaced built-ins"``."""
+    judged (:func:`detector_identity`), the ``"replaced built-ins"`` and the :data:`DETECTOR_READS`: the user's
+    files each kind's plug-in read while it was imported or detected (in this process or, ``reads``, a worker)."""
+    kinds = list(kinds)
     return {"dv2s sources (SHA-256)": dv2s_sources_sha256(),
             "plug-in modules": {module: _source_sha256(module) for module in code_modules()},
-            "detectors": detector_identity(kinds), "replaced built-ins": replaced_built_ins()}
+            "detectors": detector_identity(kinds), "replaced built-ins": replaced_built_ins(),
+            DETECTOR_READS: detector_reads(kinds, reads)}
+
+
+DETECTOR_READS = "files read by detectors"
+"""The key of a report's code identity holding, per failure kind judged, the user's files (:func:`read_facts`,
+``{fact: SHA-256}``) its plug-in read while imported or while detecting."""
+
+
+def detector_reads(kinds: Iterable[str], reads: Iterable[ReadFile] = ()) -> Dict[str, Dict[str, str]]:
+    """Per failure kind of ``kinds`` that a plug-in decides, the user's files read under its detector's label or
+    while its plug-in module (the failure type's or the detector's) was imported: in this process or ``reads``."""
+    watch()
+    found = dict(user_reads())
+    for read in reads:
+        known = found.get(read.path)
+        labels = set(read.labels) | set(known.labels if known is not None else ())
+        found[read.path] = ReadFile(read.path, read.module, read.sha256, tuple(sorted(labels)))
+    table = plugin_table()
+    facts: Dict[str, Dict[str, str]] = {}
+    for kind in kinds:
+        modules = {table["failure types"].get(kind), table["detectors"].get(kind)} - {None}
+        labels = {detector_label(kind)} | {plugin_label(module) for module in modules}
+        facts[kind] = read_facts(read for read in found.values() if labels & set(read.labels))
+    return facts
+
+
+def changed_files(facts: Mapping[str, str]) -> List[str]:
+    """``"<fact>: recorded <old>, now <new>"`` for every user file of ``facts`` (:func:`read_facts`) whose bytes
+    here differ from the recorded SHA-256 (``missing`` when it is not found)."""
+    changed = []
+    for key, recorded in sorted(facts.items()):
+        path = _found_file(key)
+        now = file_sha256(path) if path is not None else "missing"
+        if now != recorded:
+            changed.append(f"{key}: recorded {str(recorded)[:12]}, now {now[:12]}")
+    return changed

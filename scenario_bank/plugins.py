@@ -26,6 +26,7 @@ from types import ModuleType
 from typing import Dict, Iterable, List, Optional
 
 from scenario_bank.errors import DV2SError
+from scenario_bank.read_files import plugin_label, reading_for, watch
 
 __all__ = ["PluginError", "PLUGINS_VARIABLE", "MAIN", "registering_module", "remember_plugin", "forget_plugin",
            "plugin_modules", "remember_code", "code_modules", "check_plugins", "import_plugins", "load_plugins_from_environment", "module_not_found",
@@ -148,9 +149,13 @@ def import_plugins(modules: Iterable[str], where: str = "this process") -> None:
         PluginError: naming the first module that cannot be imported, where, and why: not found (then it must
             be put on the Python path), or its own code raised (then its traceback shows why).
     """
+    modules = list(modules)
+    if modules:
+        watch()  # what a plug-in reads when imported (a threshold in a file beside it) is part of a run's identity
     for module in modules:
         try:
-            importlib.import_module(module)
+            with reading_for(plugin_label(module)):
+                importlib.import_module(module)
         except BaseException as error:  # a plug-in's own failure at import time, whatever it is, is reported
             if isinstance(error, KeyboardInterrupt):
                 raise

@@ -152,7 +152,7 @@ def test_a_mining_resume_with_a_changed_or_missing_plugin_is_refused_naming_it(p
     assert "\n" not in message and message.startswith(f"{folder} holds a mining run made with other code "
                                                       "(plug-in modules' source differ: module identity_probe_plugin")
     assert message.endswith("restore the code the run used (dv2s's sources, the plug-in modules DV2S_PLUGINS "
-                            "names), or start a new --out folder")
+                            "names, the files they read), or start a new --out folder")
     plugin.write_text(original, encoding="utf-8")
     with pytest.raises(SpaceBuilt):
         _mine_settings_folder(folder)
@@ -165,7 +165,7 @@ def test_a_mining_resume_with_a_changed_or_missing_plugin_is_refused_naming_it(p
 
 def test_a_plugins_helper_module_in_another_folder_is_fingerprinted_and_its_edit_refuses_a_resume(
         helped_plugin, tmp_path, monkeypatch):
-    key = f"module file {helped_plugin.resolve()} (SHA-256)"
+    key = f"module file {helped_plugin.name} (SHA-256)"  # relative to the Python path's folder holding it
     before = code_identity()
     assert before["plug-in modules"] == [HELPED] and before[key] == run_identity.file_sha256(helped_plugin)
     folder = recorded_run_folder(tmp_path / "mine", (SCENARIO,), monkeypatch)
@@ -188,7 +188,7 @@ def test_a_loaded_module_the_run_did_not_have_is_not_compared_and_a_recorded_one
     recorded_key = f"module file {recorded_file.resolve()} (SHA-256)"
     now = code_identity()
     extra = [key for key in now if key.startswith("module file ")]
-    assert f"module file {helped_plugin.resolve()} (SHA-256)" in extra and recorded_key not in now
+    assert f"module file {helped_plugin.name} (SHA-256)" in extra and recorded_key not in now
     recorded = {CODE_IDENTITY: {**{k: v for k, v in now.items() if k not in extra},
                                 recorded_key: run_identity.file_sha256(recorded_file)}}
     run_identity.check_code_unchanged(recorded, run="out holds a mining run", error=MiningError, now=now)
@@ -389,7 +389,7 @@ def test_a_regression_resume_over_an_edited_script_or_a_changed_plugin_is_refuse
     assert str(error.value).startswith(f"{tmp_path / 'regress'} holds a regression run made with other code (plug-in "
                                        f"modules' source differ: module {PLUGIN} source (SHA-256): run has ")
     assert str(error.value).endswith("restore the code the run used (dv2s's sources, the plug-in modules DV2S_PLUGINS "
-                                     "names), or start a new --out folder (its reports (junit.xml, report.html, "
+                                     "names, the files they read), or start a new --out folder (its reports (junit.xml, report.html, "
                                      "report.md, report.json) are that run's, not this one's: nothing was written, so "
                                      "do not read them as this run's verdict)")
     plugin.write_text(PLUGIN_SOURCE.format(limit=1), encoding="utf-8")

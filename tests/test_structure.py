@@ -485,6 +485,9 @@ NAMED_NOT_LOADED: Dict[Tuple[str, str], str] = {
                                                 "(paths)",
     ("policies.run_identity", "dv2s_gym"): "the project's packages whose files are not a policy's helpers (paths)",
     ("policies.training.config", "envs"): "the name of the --envs option in a check of the settings",
+    ("scenario_bank.read_files", "envs"): "the project's packages whose files are not the user's (paths)",
+    ("scenario_bank.read_files", "policies"): "the project's packages whose files are not the user's (paths)",
+    ("scenario_bank.read_files", "dv2s_gym"): "the project's packages whose files are not the user's (paths)",
 }
 """``(module, project module)`` -> why a string in the module naming that project module does not load it (a
 name in a list of packages, a folder in a path, an option's name)."""

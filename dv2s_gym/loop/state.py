@@ -80,7 +80,8 @@ class LoopState:
             data.update({key: _in_folder(data[key], path.parent, write=False) for key in ("start", "rounds")})
         else:
             data = {**record_format(STATE_SCHEMA, STATE_VERSION), "settings": settings, "start": None, "rounds": [],
-                    REFERENCE_FINGERPRINT: resume_fingerprint(REFERENCE_DRIVER), CODE_IDENTITY: code_identity()}
+                    REFERENCE_FINGERPRINT: resume_fingerprint(REFERENCE_DRIVER),
+                    CODE_IDENTITY: code_identity(exclude=[path.parent, settings.get("bank_dir")])}
         self.rounds: List[RoundRecord] = _read_rounds(data.pop("rounds"), path)
         self.settings: RecordedLoopSettings = _read_part(RecordedLoopSettings, data.pop("settings"), path)
         start = data.pop("start", None)

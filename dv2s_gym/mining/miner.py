@@ -81,12 +81,12 @@ from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, JsonRecord, RecordError
 from scenario_bank.failure_types import failure_table
 from scenario_bank.jail import JailUnavailableError, require_jail
-from scenario_bank.run_paths import as_read, record_paths, resume_fix
+from scenario_bank.run_paths import as_read, loop_folder, record_paths, resume_fix
 from scenario_bank.run_identity import (BANK_IDENTITY, bank_identity, check_bank_unchanged, check_format,
                                        check_identity, check_run_kind, record_format)
 from policies.registry import load_policy
 from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, check_code_unchanged, check_policy_unchanged,
-                                   code_identity, resume_fingerprint)
+                                   code_identity, resume_fingerprint, ReadsRecorder, with_recorded_reads)
 
 __all__ = ["MineRun", "MineSettings", "RunOrigin", "WorkerSettings", "FEEDBACKS", "mine", "read_records",
            "episode_seed", "SETTINGS_VERSION", "progress_bar"]
@@ -245,8 +245,10 @@ class _Recorder:
     """Turns finished results into records: appended to ``episodes.jsonl``, kept in ``done``, counted on
     the progress bar (failures and distinct clusters)."""
 
-    def __init__(self, appender: JsonlAppender, done: Dict[int, EpisodeRecord], sampler: str, out: Path, bar) -> None:
+    def __init__(self, appender: JsonlAppender, done: Dict[int, EpisodeRecord], sampler: str, out: Path, bar,
+                 reads: Optional[ReadsRecorder] = None) -> None:
         self.appender, self.done, self.sampler, self.out, self.bar = appender, done, sampler, out, bar
+        self.reads = reads
         counted = [r for r in done.values() if r.failed]
         self.found = {cluster_id(r) for r in counted}
         self.failed = len(counted)
@@ -256,6 +258,8 @@ class _Recorder:
         if problem:  # the episode's trace could not be written: stop before recording it, a resume reruns it
             raise run_write_error(problem.get("path"), problem.get("errno"), problem.get("strerror"))
         record = _complete(result, task, spec, self.sampler, self.out)
+        if self.reads is not None:  # the files the episode's worker read are recorded before the episode is
+            self.reads.record()
         self.appender.append(record)
         self.done[record.index] = record
         if record.failed:
@@ -267,19 +271,27 @@ class _Recorder:
 
 
 def _recorded(policy: str, settings: MineSettings, scenarios: Sequence[str],
-              space_description: Dict[str, Any]) -> Dict[str, Any]:
+              space_description: Dict[str, Any], out: Optional[Path] = None) -> Dict[str, Any]:
     """The run's ``settings.json``: :meth:`MineSettings.recorded` (with the run's resolved batch and bank) with the
     policy, the ``scenarios`` (the keys :data:`_RESUME_KEYS` name are its identity), the fingerprints of the policy
     and of the reference driver (:func:`~policies.run_identity.resume_fingerprint`: a resume with a changed checkpoint
     or module is refused), the scenarios' scripts (:func:`~scenario_bank.run_identity.bank_identity`) and the code
-    (:func:`~policies.run_identity.code_identity`: dv2s's sources, plug-ins, detectors, replaced built-ins)."""
+    (:func:`~policies.run_identity.code_identity`: dv2s's sources, plug-ins, detectors, replaced built-ins, the user's
+    files read so far but those in ``out`` and the bank)."""
     reference = settings.reference
     return {**record_format(SETTINGS_SCHEMA, SETTINGS_VERSION), "policy": policy, **settings.recorded(),
             "batch": int(settings.batch), "scenarios": list(scenarios), SELECTION: _selection(settings),
             "space": space_description,
             RESUME_FINGERPRINT: resume_fingerprint(policy),
             REFERENCE_FINGERPRINT: resume_fingerprint(reference) if reference else None,
-            BANK_IDENTITY: bank_identity(Bank(settings.bank_dir), scenarios), CODE_IDENTITY: code_identity()}
+            BANK_IDENTITY: bank_identity(Bank(settings.bank_dir), scenarios),
+            CODE_IDENTITY: code_identity(exclude=_own_folders(out, settings))}
+
+
+def _own_folders(out: Optional[Path], settings: MineSettings) -> List[Any]:
+    """The folders whose files are the run's own, not code it runs: the run folder (and the ``dv2s loop`` folder
+    holding it: the policy a round fine-tuned is fingerprinted as the policy) and the bank."""
+    return [folder for folder in (out, loop_folder(out) if out else None, settings.bank_dir) if folder]
 
 
 SELECTION = "selection"
@@ -661,7 +673,7 @@ def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[R
     if saved is not None and saved.scenarios:
         _check_still_in_bank(out, saved.scenarios, settings.bank_dir)
     if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
-        before_space = as_read(_recorded(policy, settings, saved.scenarios, {}), out)
+        before_space = as_read(_recorded(policy, settings, saved.scenarios, {}, out), out)
         _check_resume(saved.values, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
         # the same spec naming a changed checkpoint or module is refused, naming what changed
         check_policy_unchanged(saved.values, as_read(policy, out), folder=out, run="mining run", error=MiningError)
@@ -674,9 +686,11 @@ def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[R
     names = saved.scenarios if same_selection else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
     space = space_module.SceneSpace(names or asked, settings.bank_dir)
-    recorded = _recorded(policy, settings, space.scenarios, space.describe())
+    recorded = _recorded(policy, settings, space.scenarios, space.describe(), out)
     if saved is not None:
         recorded[SELECTION] = saved.values.get(SELECTION)  # recorded once, when the run began: a resume keeps it
+        # the files the workers of the run's earlier parts read (checked unchanged above) stay part of its identity
+        recorded[CODE_IDENTITY] = with_recorded_reads(saved.values.get(CODE_IDENTITY) or {}, recorded[CODE_IDENTITY])
     if saved is not None:
         _check_resume(saved.values, as_read(recorded, out), out)
         check_bank_unchanged(saved.values.get(BANK_IDENTITY), recorded[BANK_IDENTITY],
@@ -721,7 +735,9 @@ def _run_episodes(mining: _Mining, done: Dict[int, EpisodeRecord], workers: Work
         raise MiningError(str(error)) from None
     try:
         with pool:
-            recorder = _Recorder(appender, done, mining.settings.sampler, mining.out, bar)
+            recorder = _Recorder(appender, done, mining.settings.sampler, mining.out, bar,
+                                 ReadsRecorder(mining.out / SETTINGS_FILE, pool,
+                                               _own_folders(mining.out, mining.settings)))
             if window is not None:
                 _run_window(mining, window, pool, recorder)
             else:

@@ -39,6 +39,7 @@ from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, Unknow
                                           detach_detection, failure_table, failure_type, type_label)
 from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import forget_plugin, remember_plugin
+from scenario_bank.read_files import detector_label, reading_for
 from scenario_bank.records import Failure
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "COLLISION_LABELS", "kind_label", "MonitorSettings",
@@ -117,7 +118,8 @@ def _detected(detector: Detector, result, trace, settings: MonitorSettings) -> O
         DetectorResultError: naming the detector, its module, what it returned and the fix. A failure's JSON
             object (what ``episodes.jsonl`` shows) is refused too, not read: the detector's contract is the record.
     """
-    failure = detector.detect(result, trace, settings)
+    with reading_for(detector_label(detector.name)):  # what it reads decides the kind: part of a run's identity
+        failure = detector.detect(result, trace, settings)
     if failure is None or isinstance(failure, Failure):
         return failure
     module = getattr(detector.detect, "__module__", None) or "unknown"

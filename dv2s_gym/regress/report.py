@@ -13,7 +13,9 @@ bumps it, and ``--baseline-report`` refuses a report of another version)::
       "code_identity": {"dv2s sources (SHA-256)", "plug-in modules": {module: SHA-256 of its source},
                         "detectors": {kind: {"failure type": module, "detector": module,
                                              "sources (SHA-256)": {module: SHA-256}}},
-                        "replaced built-ins": [phrases]}   the code that judged the episodes,
+                        "replaced built-ins": [phrases],
+                        "files read by detectors": {kind: {"user file limits.json (SHA-256)": SHA-256, ...}}}
+                                                   the code that judged the episodes,
       "bank": {"path": bank folder, "version": SHA-256 over the scenarios used (name + script),
                "scenarios": [names], "hashes": {name: SHA-256 of its script}},
       "settings": {"episodes", "seed", "margin", "alpha", "sequential", "env_config", "backend",
@@ -99,7 +101,7 @@ from dv2s_gym.regress import stats
 from dv2s_gym.regress.aggregates import return_aggregates
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
 from dv2s_gym.regress.failures import failure_kinds, result_value
-from policies.run_identity import BUILT_IN, installed_version, report_code_identity
+from policies.run_identity import BUILT_IN, DETECTOR_READS, changed_files, installed_version, report_code_identity
 from policies.stats import Rate
 from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, PairedEpisode, PolicyInfo,
@@ -507,11 +509,26 @@ def check_baseline_code(report: RegressReport, *, path: Union[str, os.PathLike],
                 f"({_judge(their_detectors.get(kind))} there, {_judge(our_detectors.get(kind))} here), so the two "
                 f"sides would count {kind} differently; rerun the baseline with the same plug-ins as this run "
                 "(DV2S_PLUGINS), or run it here with --baseline POLICY instead of --baseline-report")
+    _check_detector_files(theirs, path, kinds)
     other = [part.replace(" (SHA-256)", "") for part in _OTHER_CODE if theirs.get(part) != code_identity.get(part)]
     if not other:
         return None
     return (f"baseline report {path} was made with other code ({', '.join(other)} differ): differences may not "
             "be the candidate's; rerun the baseline with this code to be sure")
+
+
+def _check_detector_files(theirs: Mapping[str, Any], path: Union[str, os.PathLike], kinds: Sequence[str]) -> None:
+    """Refuse a baseline report whose judged kinds' plug-ins read files (their :data:`DETECTOR_READS`) that differ
+    here now, naming each file and both SHA-256."""
+    recorded = theirs.get(DETECTOR_READS) or {}
+    for kind in kinds:
+        changed = changed_files(dict(recorded.get(kind) or {}))
+        if changed:
+            shown = "; ".join(changed[:3]) + (f"; and {len(changed) - 3} more" if len(changed) > 3 else "")
+            raise ReportMismatchError(
+                f"baseline report {path} judged failure kind {kind!r} by a plug-in that read files which differ "
+                f"here now ({shown}), so the two sides would count {kind} differently; restore the files as the "
+                "baseline read them, or rerun the baseline with the files as they are now")
 
 
 # ----------------------------------------------------------------------------------- text

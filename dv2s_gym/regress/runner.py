@@ -40,10 +40,11 @@ from dv2s_gym.regress.report import (
     paired_tables,
 )
 from dv2s_gym.regress.outputs import write_reports
-from policies.run_identity import (CODE_IDENTITY, RESUME_FINGERPRINT, code_identity, installed_version,
+from policies.run_identity import (CODE_IDENTITY, DETECTOR_READS, RESUME_FINGERPRINT, ReadsRecorder, code_identity,
+                                   detector_reads, installed_version,
                                    report_code_identity,
                                    resume_fingerprint)
-from dv2s_gym.regress.store import BASELINE_FINGERPRINT, RunStore
+from dv2s_gym.regress.store import BASELINE_FINGERPRINT, RUN_FILE, RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
 from dv2s_gym.regress.tasks import RegressTask
 from dv2s_gym.workers.errors import WorkerError
@@ -60,6 +61,7 @@ from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.records import JsonRecord, RecordError, RegressEpisode, recorded
 from scenario_bank.run_identity import BANK_IDENTITY
+from scenario_bank.run_paths import loop_folder
 from dv2s_gym.regress.records import (BankInfo, PairedEpisode, PolicyInfo, PowerPlan, RegressReport, ReportSettings,
                                       SequentialOutcome)
 from policies.card_record import ModelCard
@@ -243,7 +245,8 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     settings = settings or RegressSettings()
     workers = workers or WorkerSettings()
     plan = _prepare(candidate, baseline, settings)
-    store = RunStore(Path(out_dir if out_dir is not None else DEFAULT_OUT), _identity(plan, settings))
+    root = Path(out_dir if out_dir is not None else DEFAULT_OUT)
+    store = RunStore(root, _identity(plan, settings, root))
     done = {key: result for key, result in store.open().items() if not result.error}  # errors run again
     policies = {"candidate": candidate, **({"baseline": plan.baseline_spec} if plan.baseline_spec else {})}
     all_tasks = plan_tasks(policies, plan.names, plan.seeds, env_config=plan.env_config, bank_dir=plan.bank_dir,
@@ -263,8 +266,9 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     report_settings["power"] = float(settings.power if settings.power is not None else power_plan.DEFAULT_POWER)
     report = build_report(bank=plan.bank, settings=ReportSettings.from_dict(report_settings),
                           candidate=plan.candidate_info, baseline=plan.baseline_info,
-                          episodes=episodes.paired(ran.seeds),
-                          stopped_early=ran.stopped_early, sequential=ran.sequential, code_identity=plan.judged_by)
+                          episodes=episodes.paired(ran.seeds), stopped_early=ran.stopped_early,
+                          sequential=ran.sequential,
+                          code_identity={**plan.judged_by, DETECTOR_READS: detector_reads(plan.failure, ran.reads)})
     report = report.replace(hostname=socket.gethostname(),
                             timing={name: round(value, 3) for name, value in episodes.timing.items()},
                             duration=round(time.time() - started, 3))
@@ -376,8 +380,14 @@ def run_size(settings: RegressSettings) -> Tuple[int, int]:
     return len(names), episodes
 
 
-def _identity(plan: _Plan, settings: RegressSettings) -> Dict[str, Any]:
-    """What a resumed run must share with the run in its folder (:class:`~dv2s_gym.regress.store.RunStore`)."""
+def _own_folders(out: Path, plan: _Plan) -> List[Any]:
+    """The folders whose files are the run's own, not code it runs: the run folder (and the ``dv2s loop`` folder
+    holding it) and the bank."""
+    return [folder for folder in (out, loop_folder(out), plan.bank_dir) if folder]
+
+
+def _identity(plan: _Plan, settings: RegressSettings, out: Path) -> Dict[str, Any]:
+    """What a resumed run must share with the run in its folder ``out`` (:class:`~dv2s_gym.regress.store.RunStore`)."""
     identity: Dict[str, Any] = {
         "candidate": plan.candidate, "baseline": plan.baseline_spec, "baseline_report": plan.report_hash,
         "baseline_role": plan.report.role if plan.report is not None else None,
@@ -389,7 +399,7 @@ def _identity(plan: _Plan, settings: RegressSettings) -> Dict[str, Any]:
     identity[RESUME_FINGERPRINT] = resume_fingerprint(plan.candidate)
     identity[BASELINE_FINGERPRINT] = resume_fingerprint(plan.baseline_spec) if plan.baseline_spec else None
     identity[BANK_IDENTITY] = dict(sorted((plan.bank.hashes or {}).items()))
-    identity[CODE_IDENTITY] = code_identity()
+    identity[CODE_IDENTITY] = code_identity(exclude=_own_folders(out, plan))
     if settings.sequential:  # the stopping point depends on these
         identity.update(margin=float(settings.margin), alpha=float(settings.alpha), batch=plan.batch)
     return identity
@@ -415,6 +425,7 @@ class _Episodes:
         self.results: Dict[Tuple[str, str], RegressEpisode] = {}
         self.timing: Dict[str, float] = {}
         self.bar = None
+        self.reads: Optional[ReadsRecorder] = None  # the files the workers read, into run.json as they appear
 
     def handle(self, result: Mapping[str, Any]) -> None:
         """Take a worker's result (:func:`~dv2s_gym.regress.tasks.run_regress_task`'s record, or a backend's error
@@ -425,6 +436,8 @@ class _Episodes:
             self.timing[record.scenario] = self.timing.get(record.scenario, 0.0) + float(seconds)
         record = record.replace(trace=self.store.relative(record.trace), null_fields=record.null_fields | {"trace"},
                                 extra={key: value for key, value in record.extra.items() if key != "seconds"})
+        if self.reads is not None:
+            self.reads.record()
         self.store.append(record)
         self.results[record.key] = record
         if self.bar is not None:
@@ -458,6 +471,8 @@ def _execute(plan: _Plan, settings: RegressSettings, workers: WorkerSettings, ep
         runner = get_backend(workers.backend, workers=workers.workers, address=workers.address,
                              timeout=workers.timeout)
         report_settings["workers"] = getattr(runner, "workers", workers.workers)
+        episodes.reads = ReadsRecorder(episodes.store.root / RUN_FILE, runner,
+                                       _own_folders(episodes.store.root, plan), where=["settings"])
         if not settings.sequential:
             pending = [t.to_json() for t in all_tasks if t.key not in episodes.results]
             if pending:
@@ -472,6 +487,7 @@ def _execute(plan: _Plan, settings: RegressSettings, workers: WorkerSettings, ep
         episodes.store.close()
         if runner is not None:
             runner.close()
+    ran.reads = list((getattr(runner, "files_read", None) or {}).values())
     return ran
 
 
@@ -483,6 +499,8 @@ class _Ran:
     seeds: List[int]
     stopped_early: bool = False
     sequential: Optional[SequentialOutcome] = None
+    reads: List[Any] = dataclasses.field(default_factory=list)
+    """The user's files the workers read (:attr:`dv2s_gym.workers.pool.LocalBackend.files_read`)."""
 
 
 def _run_sequential(plan: _Plan, settings: RegressSettings, runner: Any, episodes: _Episodes,

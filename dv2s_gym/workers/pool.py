@@ -6,7 +6,9 @@ worker (``forkserver`` context where available, else ``spawn``; ``OMP_NUM_THREAD
 the registered function of every task it gets and keeping its envs and policies between
 tasks. Before its first task, each worker imports the plug-in modules of the process that started it
 (:func:`~dv2s_gym.workers.tasks.worker_plugins`: a plug-in's failure type and detector register there too); a
-worker that cannot import one stops the run with a :class:`WorkerError` naming the module. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
+worker that cannot import one stops the run with a :class:`WorkerError` naming the module. With each result a
+worker sends the user's files it has read since its last one (:func:`scenario_bank.read_files.unsent_reads`), kept
+in :attr:`LocalBackend.files_read`. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
 result within the per-episode timeout is killed and replaced; its task is retried once
 (``retries``), then reported as an error result ``{"error": ..., "id", "role", ...}`` -
 never silently dropped; a task that finishes on a retry carries ``"worker_restarts"``, the
@@ -23,9 +25,11 @@ import os
 import time
 import warnings
 from collections import deque
+from dataclasses import astuple, replace
 from multiprocessing.connection import wait
 from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tuple
 
+from scenario_bank.read_files import ReadFile, unsent_reads, watch
 from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend, OnResult, default_workers
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.tasks import (TaskFunction, function_for, gave_up_result, result_object, run_task,
@@ -40,8 +44,10 @@ _PRELOAD = ("dv2s_gym.workers.pool", "envs.dv2s_env", "policies.evaluation")
 
 
 def _worker_main(connection, plugins: List[str]) -> None:
-    """A pool process: import the ``plugins`` modules, then receive ``(index, function, task)``, send ``(index,
-    result)``; ``None`` stops it. A plug-in that cannot be imported is sent as ``(_CANNOT_START, message)``."""
+    """A pool process: watch what it reads, import the ``plugins`` modules, then receive ``(index, function,
+    task)``, send ``(index, result, reads)`` (``reads``: the user's files read since the last result,
+    :func:`scenario_bank.read_files.unsent_reads`, as tuples); ``None`` stops it. A plug-in that cannot be imported
+    is sent as ``(_CANNOT_START, message)``."""
     os.environ["OMP_NUM_THREADS"] = "1"
     try:
         import envs.dv2s_env  # noqa: F401  (the slow imports happen before the first episode's clock starts)
@@ -52,6 +58,7 @@ def _worker_main(connection, plugins: List[str]) -> None:
         warnings.filterwarnings("ignore", category=StuckBehaviorWarning)
     except Exception:  # reported by the first task instead
         pass
+    watch()  # the files the plug-ins read, here only (a helper imported inside a detector), are the run's too
     try:
         start_plugins(plugins)
     except WorkerError as error:
@@ -71,7 +78,7 @@ def _worker_main(connection, plugins: List[str]) -> None:
         index, function, task = message
         result = run_task(function, task)
         try:
-            connection.send((index, result))
+            connection.send((index, result, [astuple(read) for read in unsent_reads()]))
         except (OSError, KeyboardInterrupt):
             return
 
@@ -201,6 +208,16 @@ class LocalBackend(Backend):
             self._context.set_forkserver_preload(list(_PRELOAD) + task_modules())
         self._pool: List[_Worker] = []
         self._plugins: List[str] = []  # the plug-in modules the workers in the pool imported
+        self.files_read: Dict[str, ReadFile] = {}
+        """The user's files the workers read (:func:`scenario_bank.read_files.user_reads`), by path: each with the
+        labels of every worker that read it and the SHA-256 the first one saw."""
+
+    def _note_read(self, read: ReadFile) -> None:
+        known = self.files_read.get(read.path)
+        if known is None:
+            self.files_read[read.path] = read
+        elif not set(read.labels) <= set(known.labels):
+            self.files_read[read.path] = replace(known, labels=tuple(sorted(set(known.labels) | set(read.labels))))
 
     def _ensure(self, count: int) -> None:
         plugins = worker_plugins()
@@ -296,7 +313,9 @@ class LocalBackend(Backend):
                 return None, None
             if isinstance(message, tuple) and message[0] == _CANNOT_START:
                 raise WorkerError(message[1])  # every worker would fail alike: the run stops, naming the module
-            _, result = message
+            _, result, reads = message
+            for read in reads:
+                self._note_read(ReadFile(*read))
             if worker.busy[0] in failures:  # finished on a retry: say what happened before
                 result = dict(result_object(result), worker_restarts=list(failures[worker.busy[0]]))
             worker.busy = None

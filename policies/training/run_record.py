@@ -19,7 +19,7 @@ from scenario_bank.atomic import atomic_write_json
 from scenario_bank.records import JsonRecord, RecordError
 from scenario_bank.run_identity import (BANK_IDENTITY, RunIdentityError, bank_identity, check_bank_unchanged,
                                         check_format, check_identity, check_run_kind, record_format)
-from scenario_bank.run_paths import as_read, read_paths, record_paths, resume_fix
+from scenario_bank.run_paths import as_read, loop_folder, read_paths, record_paths, resume_fix
 
 __all__ = [
     "TrainSegment",
@@ -96,11 +96,14 @@ class TrainRun(JsonRecord):
 
 def new_run_record(config: TrainConfig, names: Sequence[str]) -> TrainRun:
     """A new run's ``run.json``: its format, its settings, the scripts of its scenarios ``names``
-    (:func:`~scenario_bank.run_identity.bank_identity`), the code (:func:`~policies.run_identity.code_identity`) and
-    no segment yet."""
+    (:func:`~scenario_bank.run_identity.bank_identity`), the code (:func:`~policies.run_identity.code_identity`: the
+    files read in the run folder, the ``dv2s loop`` folder holding it and the bank are the run's own, not code) and no
+    segment yet."""
     return TrainRun.from_dict({**record_format(_RUN_SCHEMA, _RUN_VERSION), "config": config.to_json(),
                                BANK_IDENTITY: bank_identity(Bank(config.bank_dir), names),
-                               CODE_IDENTITY: code_identity(), "segments": []})
+                               CODE_IDENTITY: code_identity(exclude=[config.out, loop_folder(config.out),
+                                                                     config.bank_dir]),
+                               "segments": []})
 
 
 def write_run_record(path: Path, record: TrainRun) -> None:
