@@ -55,6 +55,31 @@ def test_a_registered_sampler_is_built_checked_and_accepted_everywhere(registry)
     assert failure_rate(records, sampler="sweep") == failure_rate(records, sampler="random")
     assert failure_rate(records, sampler="sweep").available and not failure_rate(records, sampler="bandit").available
     assert build_parser().parse_args(["mine", "--policy", "rule", "--sampler", "sweep"]).sampler == "sweep"
+    # a uniform sampler's draws carry the uniform proposal density, read off the record, not the name
+    assert sampler.proposal(0) == {"scenario": 1.0, "coords": [1.0] * len(space.feature_space.featureNamed["u"]
+                                                                         .domain.intervals),
+                                   "floor": 1.0, "floors": [1.0] * len(space.feature_space.featureNamed["u"]
+                                                                        .domain.intervals)}
+
+
+def test_a_registered_sampler_s_density_is_its_records(registry):
+    """``SamplerRecord.density`` tells the proposal density of a plug-in sampler; without it (and not uniform) there
+    is none, and ``density`` wins over ``uniform``."""
+    halton = samplers._REGISTRY["halton"].build
+    seen = []
+
+    def density(sampler, point):
+        seen.append(point)
+        return {"scenario": 0.25, "coords": [2.0], "floor": 0.5, "floors": [0.5]}
+
+    register_sampler("told", SamplerRecord(halton, density=density, uniform=True))
+    register_sampler("untold", SamplerRecord(halton))
+    space = SceneSpace(["highway_lead_vehicle_brakes"])
+    told, untold = make_sampler("told", space, 1), make_sampler("untold", space, 1)
+    (point, _), = told.draw(1)
+    untold.draw(1)
+    assert told.proposal(0) == {"scenario": 0.25, "coords": [2.0], "floor": 0.5, "floors": [0.5]} and seen == [point]
+    assert untold.proposal(0) is None and samplers.proposal_density("nope", None, point) is None
 
 
 def test_an_unknown_or_taken_sampler_name_is_refused(registry):

@@ -14,7 +14,8 @@ from dv2s_gym.mining.miner import read_records
 from mining_helpers import mine
 from dv2s_gym.mining.sampling.samplers import SPLIT, SceneSampler, is_adaptive, make_sampler
 from dv2s_gym.mining.sampling.space import SceneSpace
-from dv2s_gym.mining.sampling.split_sampler import scenario_dimensions
+from dv2s_gym.mining.sampling.split_sampler import (CHOOSER_TABLE, CHOOSERS, PARAM_SAMPLERS, PARAM_TABLE,
+                                                    ScenarioSplitSampler, scenario_dimensions)
 from mining_helpers import global_draws, mine_killed_after, seed_globals_and_peek
 
 BRAKES = "highway_lead_vehicle_brakes"
@@ -107,6 +108,20 @@ def test_split_options_are_checked(space):
                        ({"warmup": -1}, "warmup must be a whole number >= 0"), ({"gamma": 1}, "no option 'gamma'")):
         with pytest.raises(MiningError, match=match):
             make_sampler(SPLIT, space, 0, bad)
+
+
+def test_the_split_sampler_class_refuses_an_unknown_chooser_or_parameter_sampler(space):
+    """The public class checks its words too (the command line's check is the sampler options'): a typo is an
+    error naming the choices, never some other sampler."""
+    assert CHOOSERS == tuple(CHOOSER_TABLE) == ("cross-entropy", "ucb", "epsilon-greedy")
+    assert PARAM_SAMPLERS == tuple(PARAM_TABLE) == ("halton", "random", "bandit", "cross-entropy")
+    dimensions = scenario_dimensions(space)
+    with pytest.raises(MiningError, match=r"chooser must be one of cross-entropy, ucb, epsilon-greedy, not 'ubc'"):
+        ScenarioSplitSampler(space.feature_space, dimensions, chooser="ubc")
+    with pytest.raises(MiningError, match=r"params must be one of halton, random, bandit, cross-entropy, not 'sobol'"):
+        ScenarioSplitSampler(space.feature_space, dimensions, params="sobol")
+    for chooser in CHOOSERS:
+        assert ScenarioSplitSampler(space.feature_space, dimensions, chooser=chooser).chooser_kind == chooser
 
 
 RUN = dict(budget=12, sampler=SPLIT, scenarios=[BRAKES, LEFT_TURN], batch=4, seed=7, reference=None,

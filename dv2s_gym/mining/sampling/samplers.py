@@ -82,7 +82,13 @@ class SamplerRecord:
     adaptive: bool = False
     """Its next draws depend on the outcomes fed back (the miner streams episodes through a window)."""
     uniform: bool = False
-    """Its scenes are uniform over the scenarios and their unit boxes (importance weight 1 without a record)."""
+    """Its scenes are uniform over the scenarios and their unit boxes (importance weight 1 without a record); its
+    proposal density (:func:`proposal_density`) is the uniform one, read off the built sampler's ``space`` (VerifAI's
+    ``FeatureSpace``, as VerifAI's feature samplers hold it)."""
+    density: Optional[Callable[[Any, Any], Optional[Dict[str, Any]]]] = None
+    """``density(sampler, point)``: the density the built ``sampler`` drew ``point`` with, at the moment it drew it,
+    as :meth:`SceneSampler.proposal` describes it, or ``None`` when it cannot tell (:func:`proposal_density`);
+    ``None`` here: the uniform density for a ``uniform`` sampler, none for the others."""
 
 
 def _verifai(method: str, with_params: bool) -> Callable[[Any, Any, Any], Any]:
@@ -311,7 +317,9 @@ UNSEALED = ("the sampler checkpoint was not written by this user's dv2s-gym (no 
 
 
 def proposal_density(name: str, sampler: Any, point: Any) -> Optional[Dict[str, Any]]:
-    """The density ``sampler`` (VerifAI's, called ``name``) draws ``point`` with right now, for importance weights.
+    """The density ``sampler`` (the built sampler called ``name``) draws ``point`` with right now, for importance
+    weights: its record's :attr:`SamplerRecord.density`, else the uniform density for a
+    :attr:`SamplerRecord.uniform` sampler, else ``None`` (as for a name no sampler is registered under).
 
     ``random`` and ``halton`` draw the scenario uniformly and the unit box uniformly (Halton's sequence is
     a quasi-random uniform cover: density 1); ``cross-entropy`` draws the scenario from its discrete
@@ -322,40 +330,69 @@ def proposal_density(name: str, sampler: Any, point: Any) -> Optional[Dict[str, 
     best-scoring scenarios and the parameters uniformly. ``None`` when there is no density to tell: ``bandit`` and the ``ucb``
     chooser pick deterministically, cell avoidance never draws some cells, a warm-up round follows a fixed order.
     """
-    scenario = int(round(float(_first(point.scenario))))
-    u = [float(x) for x in point.u]
-    if name in ("random", "halton"):
-        count = _scenario_count(sampler)
-        return {"scenario": 1.0 / count, "coords": [1.0] * len(u), "floor": 1.0, "floors": [1.0] * len(u)} if count else None
-    if name == "cross-entropy":
-        domain = getattr(sampler, "domainSampler", None)
-        cont, disc = getattr(domain, "cont_sampler", None), getattr(domain, "disc_sampler", None)
-        if cont is None or disc is None:
-            return None
-        return {"scenario": float(disc.dist[0][scenario]), "coords": _bucket_densities(cont, u),
-                "floor": float(min(disc.dist[0])) * len(disc.dist[0]), "floors": _floors(cont, len(u))}
-    if name == NOVELTY:
-        row = list(getattr(sampler, "last_probabilities", None) or [])
-        if not row or scenario >= len(row):
-            return None
-        return {"scenario": float(row[scenario]), "coords": [1.0] * len(u), "floor": float(min(row)) * len(row),
-                "floors": [1.0] * len(u)}
-    if name == SPLIT:
-        if (getattr(sampler, "chooser_kind", None) != "cross-entropy" or getattr(sampler, "avoid", 0)
-                or sampler.drawn <= len(sampler.warmup_order)):
-            return None
-        dimension = sampler.dimensions[scenario]
-        own = sampler.param_samplers[scenario]
-        uniform = sampler.params_kind in ("halton", "random")
-        coords = ([1.0] * dimension if uniform else
-                  _bucket_densities(own, u[:dimension]) if sampler.params_kind == "cross-entropy" else None)
-        if coords is None:
-            return None
-        floors = [1.0] * dimension if uniform else _floors(own, dimension)
-        dist = sampler.chooser.dist[0]
-        return {"scenario": float(dist[scenario]), "coords": coords + [1.0] * (len(u) - dimension),
-                "floor": float(min(dist)) * len(dist), "floors": floors + [1.0] * (len(u) - dimension)}
-    return None
+    record = _REGISTRY.get(name, None)
+    if record is None:
+        return None
+    if record.density is not None:
+        return record.density(sampler, point)
+    return _uniform_density(sampler, point) if record.uniform else None
+
+
+def _coordinates(point: Any) -> Tuple[int, List[float]]:
+    """The scenario index and the unit-box coordinates of a mining-space ``point``."""
+    return int(round(float(_first(point.scenario)))), [float(x) for x in point.u]
+
+
+def _uniform_density(sampler: Any, point: Any) -> Optional[Dict[str, Any]]:
+    """The scenario drawn uniformly and the unit box uniformly (density 1)."""
+    _, u = _coordinates(point)
+    count = _scenario_count(sampler)
+    return {"scenario": 1.0 / count, "coords": [1.0] * len(u), "floor": 1.0, "floors": [1.0] * len(u)} if count else None
+
+
+def _cross_entropy_density(sampler: Any, point: Any) -> Optional[Dict[str, Any]]:
+    """The scenario from its discrete distribution, each coordinate from its bucket distribution."""
+    scenario, u = _coordinates(point)
+    domain = getattr(sampler, "domainSampler", None)
+    cont, disc = getattr(domain, "cont_sampler", None), getattr(domain, "disc_sampler", None)
+    if cont is None or disc is None:
+        return None
+    return {"scenario": float(disc.dist[0][scenario]), "coords": _bucket_densities(cont, u),
+            "floor": float(min(disc.dist[0])) * len(disc.dist[0]), "floors": _floors(cont, len(u))}
+
+
+def _novelty_density(sampler: Any, point: Any) -> Optional[Dict[str, Any]]:
+    """The scenario from the sampler's last mixture, the parameters uniformly."""
+    scenario, u = _coordinates(point)
+    row = list(getattr(sampler, "last_probabilities", None) or [])
+    if not row or scenario >= len(row):
+        return None
+    return {"scenario": float(row[scenario]), "coords": [1.0] * len(u), "floor": float(min(row)) * len(row),
+            "floors": [1.0] * len(u)}
+
+
+def _split_density(sampler: Any, point: Any) -> Optional[Dict[str, Any]]:
+    """The scenario from the chooser's distribution (a chooser whose draws follow it, no cell avoidance, past the
+    warm-up), the parameters from the scenario's own sampler (uniform, or by its buckets)."""
+    from dv2s_gym.mining.sampling.split_sampler import BUCKETS, CHOOSER_TABLE, PARAM_TABLE, UNIFORM
+
+    scenario, u = _coordinates(point)
+    chooser = CHOOSER_TABLE.get(getattr(sampler, "chooser_kind", None))
+    params = PARAM_TABLE.get(getattr(sampler, "params_kind", None))
+    if (chooser is None or not chooser.exact or params is None or getattr(sampler, "avoid", 0)
+            or sampler.drawn <= len(sampler.warmup_order)):
+        return None
+    dimension = sampler.dimensions[scenario]
+    own = sampler.param_samplers[scenario]
+    if params.density == UNIFORM:
+        coords, floors = [1.0] * dimension, [1.0] * dimension
+    elif params.density == BUCKETS:
+        coords, floors = _bucket_densities(own, u[:dimension]), _floors(own, dimension)
+    else:
+        return None
+    dist = sampler.chooser.dist[0]
+    return {"scenario": float(dist[scenario]), "coords": coords + [1.0] * (len(u) - dimension),
+            "floor": float(min(dist)) * len(dist), "floors": floors + [1.0] * (len(u) - dimension)}
 
 
 def _first(value):
@@ -465,14 +502,15 @@ _REGISTRY: Registry[SamplerRecord] = Registry("sampler", MiningError, {
     "random": SamplerRecord(_verifai("randomSamplerFor", False), uniform=True),
     "halton": SamplerRecord(_verifai("haltonSamplerFor", False), uniform=True),
     "cross-entropy": SamplerRecord(_verifai("crossEntropySamplerFor", True), _verifai_params("ce"),
-                                   ("alpha", "buckets", "thres"), adaptive=True),
+                                   ("alpha", "buckets", "thres"), adaptive=True,
+                                   density=_cross_entropy_density),
     "bandit": SamplerRecord(_verifai("multiArmedBanditSamplerFor", True), _verifai_params("mab"),
                             ("alpha", "buckets", "thres"), adaptive=True),
     SPLIT: SamplerRecord(_make_split, _split_params, ("alpha", "buckets", "thres", "chooser", "params", "warmup",
                                                       "avoid"),
-                         default_feedback="novelty", adaptive=True),
+                         default_feedback="novelty", adaptive=True, density=_split_density),
     NOVELTY: SamplerRecord(_make_novelty, _novelty_params, ("explore", "prior_new", "prior_old"),
-                           default_feedback="state-novelty", adaptive=True),
+                           default_feedback="state-novelty", adaptive=True, density=_novelty_density),
 })
 
 SAMPLERS = tuple(_REGISTRY)

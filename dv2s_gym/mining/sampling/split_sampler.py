@@ -41,12 +41,13 @@ redraws off, the earlier preset (2.56x the distinct failure clusters of random s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, List, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from verifai.samplers.feature_sampler import FeatureSampler, default_sampler_params
 
 from dv2s_gym.mining.cluster import region_of
+from dv2s_gym.mining.errors import MiningError
 from verifai.features import Box, DiscreteBox
 from verifai.samplers.multi_armed_bandit import ContinuousMultiArmedBanditSampler
 from verifai.samplers.cross_entropy import ContinuousCrossEntropySampler, DiscreteCrossEntropySampler
@@ -54,13 +55,8 @@ from verifai.samplers.eg_sampler import ContinuousEpsilonGreedySampler
 from verifai.samplers.halton import HaltonSampler
 from verifai.samplers.random_sampler import RandomSampler
 
-__all__ = ["AdaptSettings", "ScenarioSplitSampler", "CHOOSERS", "PARAM_SAMPLERS", "scenario_dimensions"]
-
-CHOOSERS = ("cross-entropy", "ucb", "epsilon-greedy")
-"""VerifAI samplers that can pick the scenario."""
-
-PARAM_SAMPLERS = ("halton", "random", "bandit", "cross-entropy")
-"""VerifAI samplers that can draw a scenario's parameters."""
+__all__ = ["AdaptSettings", "ScenarioSplitSampler", "CHOOSERS", "PARAM_SAMPLERS", "CHOOSER_TABLE", "PARAM_TABLE",
+           "Chooser", "ParamSampler", "UNIFORM", "BUCKETS", "scenario_dimensions"]
 
 _HALTON_START = 10_000
 """The Halton sequence of each scenario starts at a seeded index below this (a randomised start: two seeds
@@ -83,29 +79,108 @@ class AdaptSettings:
     """Per parameter, for the ``bandit`` and ``cross-entropy`` parameter samplers."""
 
 
-def _make_chooser(kind: str, count: int, adapt: AdaptSettings):
-    alpha, thres = adapt.alpha, adapt.thres
-    if kind == "cross-entropy":
-        return DiscreteCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres)
-    if kind == "epsilon-greedy":
-        return ContinuousEpsilonGreedySampler(domain=Box([0.0, 1.0]), alpha=alpha, thres=thres, buckets=count)
+@dataclass(frozen=True)
+class Chooser:
+    """A VerifAI sampler that picks the scenario: a row of :data:`CHOOSER_TABLE`."""
 
-    return ContinuousMultiArmedBanditSampler(domain=Box([0.0, 1.0]), alpha=alpha, thres=thres, buckets=count)
+    build: Callable[[int, AdaptSettings], Any]
+    """``build(scenario count, adapt)``: the VerifAI sampler."""
+    bucketed: bool
+    """It draws a point of ``[0, 1]`` cut into one bucket per scenario, the bucket (its ``info``) being the
+    scenario; otherwise it draws the scenario index itself."""
+    exact: bool
+    """Each of its draws follows its distribution ``dist`` (so that is the scenario's proposal density)."""
+    draw: Callable[[Any], Tuple[Any, Any]]
+    """``draw(sampler) -> (sample, info)``: its next scenario draw."""
+    weights: Callable[[Any], List[float]]
+    """``weights(sampler)``: its current weight of each scenario (:meth:`ScenarioSplitSampler.scenario_weights`)."""
 
 
-def _make_params(kind: str, dimension: int, alpha: float, thres: float, buckets: int):
-    box = Box(*[[0.0, 1.0]] * max(dimension, 1))
-    if kind == "halton":
-        start = int(np.random.randint(0, _HALTON_START))  # the caller seeds the generators
-        params = default_sampler_params("halton")  # VerifAI's DotMap: sample_index, bases_skipped
-        params.sample_index = start
-        return HaltonSampler(domain=box, halton_params=params)
-    if kind == "random":
-        return RandomSampler(box)
-    if kind == "bandit":
-        return ContinuousMultiArmedBanditSampler(domain=box, alpha=alpha, thres=thres, buckets=buckets)
+UNIFORM = "uniform"
+"""A parameter sampler whose points are uniform over the unit box (density 1)."""
+BUCKETS = "buckets"
+"""A parameter sampler that draws each coordinate from its bucket distribution ``dist``."""
 
-    return ContinuousCrossEntropySampler(domain=box, alpha=alpha, thres=thres, buckets=buckets)
+
+@dataclass(frozen=True)
+class ParamSampler:
+    """A VerifAI sampler that draws a scenario's parameters: a row of :data:`PARAM_TABLE`."""
+
+    build: Callable[[Any, AdaptSettings], Any]
+    """``build(unit box, adapt)``: the VerifAI sampler (with the generators seeded)."""
+    density: Optional[str]
+    """How its draws' density is told: :data:`UNIFORM`, :data:`BUCKETS`, or ``None`` (it cannot be)."""
+
+
+def _get_sample(chooser) -> Tuple[Any, Any]:
+    return chooser.getSample()
+
+
+def _generate_sample(chooser) -> Tuple[Any, Any]:
+    vector, info = chooser.generateSample()  # VerifAI's epsilon-greedy class has no getVector
+    return chooser.domain.unstandardize(vector), info
+
+
+def _distribution(chooser) -> List[float]:
+    return [float(x) for x in chooser.dist[0]]
+
+
+def _ucb_scores(chooser) -> List[float]:
+    proportions = chooser.errors[0] / chooser.counts[0]
+    return [float(x) for x in proportions + np.sqrt(2 / chooser.counts[0] * np.log(chooser.t))]
+
+
+CHOOSER_TABLE: Dict[str, Chooser] = {
+    "cross-entropy": Chooser(
+        lambda count, adapt: DiscreteCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=adapt.alpha,
+                                                         thres=adapt.thres),
+        bucketed=False, exact=True, draw=_get_sample, weights=_distribution),
+    "ucb": Chooser(
+        lambda count, adapt: ContinuousMultiArmedBanditSampler(domain=Box([0.0, 1.0]), alpha=adapt.alpha,
+                                                               thres=adapt.thres, buckets=count),
+        bucketed=True, exact=False, draw=_get_sample, weights=_ucb_scores),
+    "epsilon-greedy": Chooser(
+        lambda count, adapt: ContinuousEpsilonGreedySampler(domain=Box([0.0, 1.0]), alpha=adapt.alpha,
+                                                            thres=adapt.thres, buckets=count),
+        bucketed=True, exact=False, draw=_generate_sample, weights=_distribution),
+}
+"""The scenario choosers by name (the module docstring says what each does)."""
+
+
+def _halton(box, adapt: AdaptSettings):
+    start = int(np.random.randint(0, _HALTON_START))  # the caller seeds the generators
+    params = default_sampler_params("halton")  # VerifAI's DotMap: sample_index, bases_skipped
+    params.sample_index = start
+    return HaltonSampler(domain=box, halton_params=params)
+
+
+PARAM_TABLE: Dict[str, ParamSampler] = {
+    "halton": ParamSampler(_halton, UNIFORM),
+    "random": ParamSampler(lambda box, adapt: RandomSampler(box), UNIFORM),
+    "bandit": ParamSampler(lambda box, adapt: ContinuousMultiArmedBanditSampler(
+        domain=box, alpha=adapt.alpha, thres=adapt.thres, buckets=adapt.buckets), None),
+    "cross-entropy": ParamSampler(lambda box, adapt: ContinuousCrossEntropySampler(
+        domain=box, alpha=adapt.alpha, thres=adapt.thres, buckets=adapt.buckets), BUCKETS),
+}
+"""The parameter samplers by name (the module docstring says what each does)."""
+
+CHOOSERS = tuple(CHOOSER_TABLE)
+"""VerifAI samplers that can pick the scenario."""
+
+PARAM_SAMPLERS = tuple(PARAM_TABLE)
+"""VerifAI samplers that can draw a scenario's parameters."""
+
+
+def _row(table: Dict[str, Any], what: str, word: str):
+    """``table[word]``, or a :class:`MiningError` naming the choices."""
+    row = table.get(word) if isinstance(word, str) else None
+    if row is None:
+        raise MiningError(f"the split sampler's {what} must be one of {', '.join(table)}, not {word!r}")
+    return row
+
+
+def _make_params(kind: str, dimension: int, adapt: AdaptSettings):
+    return PARAM_TABLE[kind].build(Box(*[[0.0, 1.0]] * max(dimension, 1)), adapt)
 
 
 class ScenarioSplitSampler(FeatureSampler):
@@ -114,7 +189,8 @@ class ScenarioSplitSampler(FeatureSampler):
     Args:
         space: the VerifAI ``FeatureSpace`` of the mining space (``scenario``, ``u``).
         dimensions: each scenario's parameter count, in index order (:func:`scenario_dimensions`).
-        chooser: :data:`CHOOSERS`; ``params``: :data:`PARAM_SAMPLERS`.
+        chooser: :data:`CHOOSERS`; ``params``: :data:`PARAM_SAMPLERS` (another word raises
+            :class:`~dv2s_gym.mining.errors.MiningError` naming the choices).
         adapt: VerifAI's parameters of the adaptive parts (:class:`AdaptSettings`).
         warmup: the first ``warmup * len(dimensions)`` scenes try every scenario ``warmup`` times (each
             round in a seeded order) and are fed to the chooser like its own draws; 0: none.
@@ -132,10 +208,11 @@ class ScenarioSplitSampler(FeatureSampler):
         self.width = max([int(d) for d in dimensions] + [1])
         """Coordinates of ``u`` in the feature space (the largest parameter count)."""
         self.dimensions = [int(d) for d in dimensions]
+        kind = _row(CHOOSER_TABLE, "chooser", chooser)
+        _row(PARAM_TABLE, "params", params)
         self.chooser_kind, self.params_kind = chooser, params
-        self.chooser = _make_chooser(chooser, len(self.dimensions), adapt)
-        self.param_samplers = [_make_params(params, d, adapt.alpha, adapt.thres, adapt.buckets)
-                               for d in self.dimensions]
+        self.chooser = kind.build(len(self.dimensions), adapt)
+        self.param_samplers = [_make_params(params, d, adapt) for d in self.dimensions]
         self.draws = [0] * len(self.dimensions)
         """Scenes drawn per scenario."""
         count = len(self.dimensions)
@@ -148,20 +225,14 @@ class ScenarioSplitSampler(FeatureSampler):
         """Per scenario: the cluster-grid cells (:func:`~dv2s_gym.mining.cluster.region_of`) of its failures."""
 
     def _scenario(self) -> Tuple[int, Any, Any]:
+        chooser = CHOOSER_TABLE[self.chooser_kind]
         if self.drawn < len(self.warmup_order):  # warm-up: the chooser is only fed, as if it had drawn these
             index = self.warmup_order[self.drawn]
-            if self.chooser_kind == "cross-entropy":
+            if not chooser.bucketed:
                 return index, (index,), None
             return index, ((index + 0.5) / len(self.dimensions),), np.array([index])
-        if self.chooser_kind == "epsilon-greedy":  # VerifAI's class draws with generateSample (no getVector)
-            vector, info = self.chooser.generateSample()
-            sample = self.chooser.domain.unstandardize(vector)
-        else:
-            sample, info = self.chooser.getSample()
-        if self.chooser_kind in ("ucb", "epsilon-greedy"):
-            index = int(info[0])  # the bucket is the scenario
-        else:
-            index = int(sample[0])
+        sample, info = chooser.draw(self.chooser)
+        index = int(info[0]) if chooser.bucketed else int(sample[0])  # a bucketed chooser's bucket is the scenario
         return min(max(index, 0), len(self.dimensions) - 1), sample, info
 
     def getSample(self):
@@ -188,8 +259,6 @@ class ScenarioSplitSampler(FeatureSampler):
         self.param_samplers[index].update(own, own_info, rho)
 
     def scenario_weights(self) -> List[float]:
-        """The chooser's current probability of each scenario (``cross-entropy``), or its UCB scores (``ucb``)."""
-        if self.chooser_kind in ("cross-entropy", "epsilon-greedy"):
-            return [float(x) for x in self.chooser.dist[0]]
-        proportions = self.chooser.errors[0] / self.chooser.counts[0]
-        return [float(x) for x in proportions + np.sqrt(2 / self.chooser.counts[0] * np.log(self.chooser.t))]
+        """The chooser's current probability of each scenario (``cross-entropy``, ``epsilon-greedy``), or its UCB
+        scores (``ucb``)."""
+        return CHOOSER_TABLE[self.chooser_kind].weights(self.chooser)
