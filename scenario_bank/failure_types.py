@@ -4,7 +4,9 @@ Each row (:class:`FailureType`) says what the rest of the project reads about a 
 records and regression results write it), its ``severity`` (0 is the most severe; the table is in that order),
 the field of a regression result that says it happened (``result_field``), whether ``dv2s regress`` counts it
 as a failure by default (``regress_default``), whether the failure names the actor it met
-(``with_actor``) and the ``label`` reports show for it (``None``: reports show its ``name``; :func:`type_label`).
+(``with_actor``), the ``label`` reports show for it (``None``: reports show its ``name``; :func:`type_label`), and
+what kind of failure it is, which the miner's conversion of a failure into a scenario reads: the ego touching
+the actor (``contact``), the ego standing (``standstill``), a close call without harm (``near_miss``).
 
 The failure miner detects every type of the table, each through its detector (:mod:`dv2s_gym.mining.monitors`),
 and its reports list them in severity order (:func:`failure_table`: the table and the rows added at run time with
@@ -26,7 +28,7 @@ from scenario_bank.records import RegressEpisode
 __all__ = ["FailureTypeError", "UnknownDetectorError", "FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table",
            "failure_type", "severity_order",
            "register_failure_type", "unregister_failure_type", "type_label", "attach_detection", "detach_detection",
-           "happened", "plugin_table"]
+           "happened", "plugin_table", "is_contact", "is_standstill", "is_near_miss"]
 
 
 class FailureTypeError(DV2SError, ValueError):
@@ -55,13 +57,28 @@ class FailureType:
     """Whether the failure names the actor it met (a mined failure's ``with``)."""
     label: Optional[str]
     """What reports call the type (:func:`type_label`); ``None``: they call it by its ``name``."""
+    contact: bool = False
+    """Whether the failure is the ego touching the actor it names, as a collision is: the behaviour of the failure is
+    read one state before it (the state at the impact already carries the speed it took away), a failure class also
+    compares how they met (``collision_type``), the actor is the trace's first collision of the ego when the failure
+    names none, and a scenario converted from it must show that actor colliding with the ego."""
+    standstill: bool = False
+    """Whether the failure is the ego standing, as a stall is: its video's window covers the standing frames, and
+    the actor it involves, when it names none, is the one ahead of the ego where the failure began."""
+    near_miss: bool = False
+    """Whether the failure is a close call without harm, as a low time-to-collision is: the reference driver's
+    failure of this type on a scenario converted from a failure fails the scenario only when the policy's failure
+    was no more severe."""
 
 
 FAILURE_TABLE: Tuple[FailureType, ...] = (
-    FailureType("collision", severity=0, result_field="collided", regress_default=True, with_actor=True, label="collision"),
+    FailureType("collision", severity=0, result_field="collided", regress_default=True, with_actor=True, label="collision",
+                contact=True),
     FailureType("off_road", severity=1, result_field="off_road", regress_default=True, with_actor=False, label="off road"),
-    FailureType("low_ttc", severity=2, result_field=None, regress_default=False, with_actor=True, label=None),
-    FailureType("stall", severity=3, result_field="stalled", regress_default=True, with_actor=False, label="stall"),
+    FailureType("low_ttc", severity=2, result_field=None, regress_default=False, with_actor=True, label=None,
+                near_miss=True),
+    FailureType("stall", severity=3, result_field="stalled", regress_default=True, with_actor=False, label="stall",
+                standstill=True),
 )
 """Every failure type, most severe first."""
 
@@ -94,6 +111,27 @@ def type_label(name: str) -> str:
     failure type, e.g. one a run recorded with a plug-in not loaded now)."""
     row = _BY_NAME.get(name)
     return row.label if row is not None and row.label else name
+
+
+def is_contact(name: Optional[str]) -> bool:
+    """Whether the failure type ``name`` is the ego touching an actor (its row's ``contact``; ``False`` for a name
+    that is no failure type)."""
+    row = _BY_NAME.get(name) if name is not None else None
+    return row is not None and row.contact
+
+
+def is_standstill(name: Optional[str]) -> bool:
+    """Whether the failure type ``name`` is the ego standing (its row's ``standstill``; ``False`` for a name that is
+    no failure type)."""
+    row = _BY_NAME.get(name) if name is not None else None
+    return row is not None and row.standstill
+
+
+def is_near_miss(name: Optional[str]) -> bool:
+    """Whether the failure type ``name`` is a close call without harm (its row's ``near_miss``; ``False`` for a name
+    that is no failure type)."""
+    row = _BY_NAME.get(name) if name is not None else None
+    return row is not None and row.near_miss
 
 
 def severity_order(names: Iterable[str]) -> List[str]:

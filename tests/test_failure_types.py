@@ -21,7 +21,8 @@ from envs.trace import EpisodeTrace
 from policies.evaluation import EpisodeResult
 from scenario_bank.records import Failure, RegressEpisode
 from scenario_bank.failure_types import (FAILURE_TABLE, FAILURE_TYPES, FailureType, failure_table, failure_type,
-                                         register_failure_type, severity_order, unregister_failure_type)
+                                         is_contact, is_near_miss, is_standstill, register_failure_type, severity_order,
+                                         unregister_failure_type)
 from tests.test_mining_report import make_run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -225,3 +226,127 @@ def test_every_collision_type_has_a_label_and_a_kind_reads_as_words():
     assert kind_label("off_road") == "off road" and kind_label("stall") == "stall"
     assert kind_label("collision:t_bone") == "collision (t bone)"  # a refinement no table names
     assert kind_label("wobble") == "wobble"  # a type of a plug-in not loaded now
+
+
+def test_what_kind_of_failure_each_built_in_type_is():
+    """The facts the conversion reads (contact, standstill, near miss) are the built-in rows'; a name that is no
+    failure type has none."""
+    assert [row.name for row in FAILURE_TABLE if row.contact] == ["collision"]
+    assert [row.name for row in FAILURE_TABLE if row.standstill] == ["stall"]
+    assert [row.name for row in FAILURE_TABLE if row.near_miss] == ["low_ttc"]
+    assert is_contact("collision") and is_standstill("stall") and is_near_miss("low_ttc")
+    assert not any(check(name) for check in (is_contact, is_standstill, is_near_miss) for name in ("off_road", "x", None))
+
+
+def _kind_of_failure(name: str, severity: int, **facts) -> FailureType:
+    return FailureType(name, severity=severity, result_field=None, regress_default=False, with_actor=True, label=None,
+                       **facts)
+
+
+def test_a_plug_in_type_declares_what_kind_of_failure_it_is():
+    """A plug-in type that says it is a contact, a standstill or a near miss is treated as the built-in type of that
+    kind is, where the miner and the conversion treat one specially; without the fact it is not."""
+    from dv2s_gym.mining.behaviour import extract_behaviour, involved_actor
+    from dv2s_gym.mining.conversion.episodes import reference_failed, same_failure_class
+
+    base = len(FAILURE_TABLE) + 60
+    rows = [_kind_of_failure("bump", base, contact=True), _kind_of_failure("blocked", base + 1, standstill=True),
+            _kind_of_failure("close_pass", base + 2, near_miss=True), _kind_of_failure("plain", base + 3)]
+    for row in rows:
+        register_failure_type(row)
+    try:
+        assert not same_failure_class(Failure("bump", collision_type="side"), Failure("bump", collision_type="head_on"))
+        assert same_failure_class(Failure("plain", collision_type="side"), Failure("plain", collision_type="head_on"))
+        # the reference's near miss fails the scenario only when the policy's failure was no more severe
+        assert not reference_failed(Failure("collision"), Failure("close_pass"))
+        assert reference_failed(Failure("collision"), Failure("plain"))
+        ahead = EpisodeTrace(scenario="s", source="test", seed=0, scene_seed=0, params={},
+                             config={"policy_frequency": 5}, events=[], kinds={"ego": "ego", "lead": "car"},
+                             states=[{"ego": [0.0, 0.0, 0.0, 0.0], "lead": [8.0, 0.0, 0.0, 0.0]}] * 3)
+        assert involved_actor(ahead, Failure("blocked", step=2)) == "lead"
+        assert involved_actor(ahead, Failure("plain", step=2)) is None
+        # a contact's behaviour is read one state before it: the state at the impact has lost its speed
+        moving = EpisodeTrace(scenario="s", source="test", seed=0, scene_seed=0, params={},
+                              config={"policy_frequency": 5}, events=[], kinds={"ego": "ego"},
+                              states=[{"ego": [2.0 * i, 0.0, 0.0, 10.0]} for i in range(11)]
+                              + [{"ego": [21.0, 0.0, 0.0, 0.0]}])
+        assert extract_behaviour(moving, Failure("bump", step=11)).ego_manoeuvre == "keeping_lane"
+        assert extract_behaviour(moving, Failure("plain", step=11)).ego_manoeuvre == "stopped"
+    finally:
+        for row in rows:
+            unregister_failure_type(row.name)
+
+
+FAILURE_COMPARISONS_ALLOWED = {
+    ("dv2s_gym/mining/monitors.py", "kind_label", "collision"):
+        "COLLISION_LABELS are the words of the built-in collision's own refinement (its collision types, "
+        "'rear-end collision'); another type's refinement read through them would be called a collision",
+    ("dv2s_gym/regress/runner.py", "_check_env_config", "stall"):
+        "--stall-seconds is the setting of the built-in stall detector: a stall-seconds not shorter than the episodes "
+        "makes that type undetectable when --failure counts it",
+    ("dv2s_gym/regress/runner.py", "_baseline_from_report", "stall"):
+        "the baseline report records the built-in stall detector's stall-seconds: compared when --failure counts "
+        "that type",
+}
+"""Comparisons with a built-in failure type's name that stay, by (module, function, name), with the reason."""
+
+EVENT_KINDS = frozenset({"collision", "off_road"})
+"""The trace's event kinds that are also failure types' names (the simulator's ``collision``, the env's
+``off_road`` event): comparing an event's kind with them reads the trace's vocabulary, not the failure table."""
+
+
+def _reads_event_kind(node: ast.AST) -> bool:
+    """``x["kind"]`` or ``x.get("kind")``: a trace event's kind."""
+    if isinstance(node, ast.Subscript):
+        return isinstance(node.slice, ast.Constant) and node.slice.value == "kind"
+    return (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get"
+            and bool(node.args) and isinstance(node.args[0], ast.Constant) and node.args[0].value == "kind")
+
+
+def _spelled_names(node: ast.AST) -> List[str]:
+    """The built-in failure-type names ``node`` spells: a string, or a tuple, list or set of strings."""
+    items = node.elts if isinstance(node, (ast.Tuple, ast.List, ast.Set)) else [node]
+    return [item.value for item in items if isinstance(item, ast.Constant) and item.value in FAILURE_TYPES]
+
+
+def _failure_name_comparisons(source: str, where: str) -> List[tuple]:
+    """``(where, function, name, line)`` of every ``==``, ``!=``, ``in``, ``not in`` with a built-in failure-type
+    name in a module's source, but an event's kind compared with an event kind."""
+    found = []
+
+    def visit(node: ast.AST, function: str) -> None:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            function = node.name
+        if isinstance(node, ast.Compare):
+            operands = [node.left] + list(node.comparators)
+            for op, left, right in zip(node.ops, operands, operands[1:]):
+                if not isinstance(op, (ast.Eq, ast.NotEq, ast.In, ast.NotIn)):
+                    continue
+                for name_side, other in ((left, right), (right, left)):
+                    for name in _spelled_names(name_side):
+                        if not (name in EVENT_KINDS and _reads_event_kind(other)):
+                            found.append((where, function, name, node.lineno))
+        for child in ast.iter_child_nodes(node):
+            visit(child, function)
+
+    visit(ast.parse(source, where), "<module>")
+    return found
+
+
+def test_no_product_comparison_spells_a_built_in_failure_type():
+    """A branch on a built-in type's name leaves a plug-in type out: read the row's facts (``with_actor``,
+    ``contact``, ``standstill``, ``near_miss``, ``result_field``) instead. The comparisons that stay are
+    :data:`FAILURE_COMPARISONS_ALLOWED`, each with its reason."""
+    planted = ('def f(failure, event, kind):\n    stall = failure.type == "stall"\n'
+               '    if kind in ("low_ttc", "x"):\n        pass\n    if event.get("kind") == "collision":\n'
+               '        pass\n    if event["kind"] == "stall" or "off_road" != kind:\n        pass\n')
+    assert [(name, line) for _, function, name, line in _failure_name_comparisons(planted, "planted.py")] == [
+        ("stall", 2), ("low_ttc", 3), ("stall", 7), ("off_road", 7)]  # an event's collision kind is not one
+    found = [hit for package in PACKAGES for path in sorted((ROOT / package).rglob("*.py"))
+             for hit in _failure_name_comparisons(path.read_text(encoding="utf-8"), path.relative_to(ROOT).as_posix())]
+    unexplained = [f"{where}:{line} ({function}): {name!r}" for where, function, name, line in found
+                   if (where, function, name) not in FAILURE_COMPARISONS_ALLOWED]
+    assert not unexplained, ("comparisons with a built-in failure type's name (read the row's facts, or allow one "
+                             "with its reason):\n" + "\n".join(unexplained))
+    stale = set(FAILURE_COMPARISONS_ALLOWED) - {(where, function, name) for where, function, name, _ in found}
+    assert not stale, f"allowed comparisons that are gone: {sorted(stale)}"

@@ -24,7 +24,7 @@ braking or stopping of either side):
 
 Sideways motion is measured across the heading at the start of the window, so on a tight curve a
 long window can read as a lane change; the bank's roads are mostly straight or gently curved over
-two seconds. A ``stall`` names the actor the ego stood behind (:func:`actor_ahead`: the nearest one ahead in
+two seconds. A ``stall`` (any type whose row says ``standstill``) names the actor the ego stood behind (:func:`actor_ahead`: the nearest one ahead in
 the ego's lane, within :data:`WAITING_DISTANCE`, at the stall's start); a stall on a free road, and a failure
 without another actor (``off_road``), have actor ``"none"``.
 
@@ -36,6 +36,7 @@ import math
 from typing import Any, Dict, List, Mapping, Optional
 
 from dv2s_gym.mining.monitors import Failure
+from scenario_bank.failure_types import is_contact, is_standstill
 from scenario_bank.records import UNKNOWN_PART, Behaviour, EpisodeRecord
 
 __all__ = ["Behaviour", "extract_behaviour", "behaviour_of", "actor_ahead", "involved_actor", "WAITING_DISTANCE", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
@@ -137,15 +138,15 @@ def actor_ahead(states: Mapping[str, List[float]], distance: float = WAITING_DIS
 
 
 def involved_actor(trace: Any, failure: Optional[Failure]) -> Optional[str]:
-    """The other actor ``failure`` involves in ``trace``: the one it names (``with_``), else for a stall the actor
-    the ego stood behind at the stall's start (:func:`actor_ahead`); ``None`` when there is none."""
+    """The other actor ``failure`` involves in ``trace``: the one it names (``with_``), else for a standstill (a
+    ``stall``: :attr:`~scenario_bank.failure_types.FailureType.standstill`) the actor the ego stood behind at the stall's start (:func:`actor_ahead`); ``None`` when there is none."""
     if failure is None:
         return None
     states = list(getattr(trace, "states", None) or [])
     other = failure.with_
     if other and other != "ego":
         return str(other)
-    if failure.type != "stall" or not states:
+    if not is_standstill(failure.type) or not states:
         return None
     step = failure.step
     step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
@@ -163,7 +164,7 @@ def extract_behaviour(trace: Any, failure: Optional[Failure]) -> Optional[Behavi
     steps = max(1, int(round(WINDOW_SECONDS * frequency)))
     step = failure.step
     step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
-    if failure.type == "collision" and step > 0:
+    if is_contact(failure.type) and step > 0:
         step -= 1  # the state logged at the impact already carries the speed the collision took away
     ego_path = _window(states, "ego", step, steps)
     other = involved_actor(trace, failure)

@@ -27,7 +27,7 @@ import os
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any, Callable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from tqdm import tqdm
 
@@ -42,7 +42,7 @@ from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH,
                                   row_label as _row_label, svg as _svg, video_bytes as _video_bytes, video_tag,
                                   x_scale as _x_scale)
 from scenario_bank.atomic import atomic_write_text
-from scenario_bank.failure_types import FAILURE_TABLE
+from scenario_bank.failure_types import FAILURE_TABLE, FailureType
 from scenario_bank.records import RegressEpisode, recorded
 
 __all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
@@ -272,12 +272,25 @@ def _scenario_table(report: RegressReport) -> str:
     return "".join(out) + "</table>"
 
 
-def _outcome_detail(kind: str, result: RegressEpisode) -> str:
-    """What an episode's outcome says after a failure kind's label: whom it collided with, when it stalled."""
-    if kind == "collision" and result.collisions:
-        return f" with {', '.join(map(str, result.collisions))}"
-    stall = _num(result.stall_time) if kind == "stall" else None
+def _collided_detail(result: RegressEpisode) -> str:
+    return f" with {', '.join(map(str, result.collisions))}" if result.collisions else ""
+
+
+def _stalled_detail(result: RegressEpisode) -> str:
+    stall = _num(result.stall_time)
     return f" from {stall:.1f} s" if stall is not None else ""
+
+
+_DETAILS: Dict[str, Callable[[RegressEpisode], str]] = {"collided": _collided_detail, "stalled": _stalled_detail}
+"""What an episode's outcome says after a failure kind's label, by the kind's result field: the result records whom
+the ego collided with (``collisions``) and when it began to stall (``stall_time``) beside those two fields."""
+
+
+def _outcome_detail(row: FailureType, result: RegressEpisode) -> str:
+    """What an episode's outcome says after the label of failure type ``row``: whom it collided with, when it
+    stalled (:data:`_DETAILS`)."""
+    detail = _DETAILS.get(row.result_field or "")
+    return detail(result) if detail is not None else ""
 
 
 def _outcome(result: Optional[RegressEpisode]) -> str:
@@ -286,7 +299,7 @@ def _outcome(result: Optional[RegressEpisode]) -> str:
     if result.error:
         return f"error: {result.error}"
     # a failure kind's result field is one of the record's attributes (collided, off_road, stalled)
-    parts = [row.label + _outcome_detail(row.name, result) for row in FAILURE_TABLE
+    parts = [row.label + _outcome_detail(row, result) for row in FAILURE_TABLE
              if row.label and row.result_field and getattr(result, row.result_field)]
     if not parts:
         parts.append("success" if result.success else "no failure")

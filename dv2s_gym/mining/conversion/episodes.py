@@ -28,6 +28,7 @@ from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline.semantics.trace import trace_actor_kind
 from policies.evaluation import run_episode
 from policies.registry import load_policy
+from scenario_bank.failure_types import is_contact, is_near_miss
 from scenario_bank.records import EpisodeRecord, Failure, recorded
 
 __all__ = ["same_failure_class", "reference_failed", "reference_passed", "reference_outcome", "reproduction_seeds",
@@ -39,7 +40,7 @@ def same_failure_class(source: Failure, candidate: Optional[Failure]) -> bool:
     """Whether ``candidate`` (a failure, or None) is in the failure class of ``source`` (see the module doc)."""
     if candidate is None or candidate.type != source.type:
         return False
-    if source.type == "collision":
+    if is_contact(source.type):
         for mine, theirs in ((source.with_kind, candidate.with_kind),
                              (source.collision_type, candidate.collision_type)):
             if mine is not None and theirs is not None and mine != theirs:
@@ -54,7 +55,7 @@ def reference_failed(source: Optional[Failure], reference_failure: Optional[Fail
     source failure unavoidable too)."""
     if reference_failure is None or not reference_failure.type:
         return False
-    if reference_failure.type != "low_ttc":
+    if not is_near_miss(reference_failure.type):
         return True
     return not reference_avoids(source, reference_failure)
 

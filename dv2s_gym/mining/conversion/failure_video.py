@@ -47,6 +47,7 @@ from envs.safety_metrics import path_is_free
 from envs.trace import EpisodeTrace, TraceMismatchError
 from policies.evaluation import run_episode, make_eval_env
 from policies.registry import load_policy
+from scenario_bank.failure_types import is_standstill
 from scenario_bank.records import EpisodeRecord, Failure, RecordError
 
 __all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "VideoSettings", "clip_camera", "failure_step",
@@ -413,7 +414,7 @@ def _record_clip(record: EpisodeRecord, settings: VideoSettings) -> tuple:
     frequency = _frequency({**VIDEO_CONFIG, **dict(settings.env_config or {})})
     steps = int(record.result.steps or 0) if record.result is not None else 0
     k = failure_step(record.failure, steps, frequency)
-    stall = record.failure is not None and record.failure.type == "stall"
+    stall = record.failure is not None and is_standstill(record.failure.type)
     span = _stall_span(settings, frequency) if stall else 0  # an upper bound of the stall's frames
     end = k + span + int(round(settings.after * frequency))
     camera: Dict[str, Any] = {}
@@ -473,7 +474,7 @@ def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any]
     frequency = _frequency(config)
     seed, episode_steps = int(episode["seed"]), int(episode["steps"])
     failure, trajectory_hash = Failure.of(episode.get("failure")), episode.get("trajectory_hash")
-    stall = failure is not None and failure.type == "stall"
+    stall = failure is not None and is_standstill(failure.type)
     k = (failure_step(failure, episode_steps, frequency) if failure is not None
          else max(0, min(episode_steps, episode_steps if centre is None else int(centre))))
     span = _stall_span(settings, frequency) if stall else 0  # an upper bound of the stall's frames

@@ -29,7 +29,7 @@ from typing import Any, ClassVar, Dict, FrozenSet, List, Mapping, Optional, Tupl
 
 from dv2s_gym.pipeline.semantics.trace import ego_frame, elements_from_trace, trace_actor_kind
 from scenario_bank.elements import Action, ActorKind, Elements, Relation
-from scenario_bank.failure_types import failure_type
+from scenario_bank.failure_types import failure_type, is_contact
 from scenario_bank.records import Failure, JsonRecord
 
 __all__ = ["MANOEUVRES", "LOOKBACK_S", "FailureInteraction", "key_actor", "actor_manoeuvres", "failure_interaction",
@@ -72,7 +72,7 @@ def key_actor(trace, failure: Optional[Failure]) -> Optional[str]:
     names = [n for n in trace.states[0] if n != "ego"]
     kind = failure.type if failure is not None else None
     partner = failure.with_ if failure is not None else None
-    if kind == "collision" and partner is None:
+    if is_contact(kind) and partner is None:
         event = trace.ego_collision()
         partner = trace.other_actor(event) if event is not None else None
     row = failure_type(str(kind))
@@ -182,7 +182,7 @@ def shows_interaction(interaction: FailureInteraction, elements: Elements) -> bo
     if kind not in elements.participants:
         return False
     actions = {action for who, action in elements.actions if who == kind}
-    if interaction.failure_type == "collision" and Action.COLLIDE not in actions:
+    if is_contact(interaction.failure_type) and Action.COLLIDE not in actions:
         return False
     wanted = set(interaction.manoeuvres or ())
     if not wanted:
@@ -205,7 +205,7 @@ def trace_shows_interaction(interaction: FailureInteraction, trace) -> bool:
     if kind is None:
         return True
     names = [name for name in (trace.states[0] if trace.states else {}) if name != "ego"]
-    if interaction.failure_type == "collision":
+    if is_contact(interaction.failure_type):
         partners = {trace.other_actor(event) for event in trace.events
                     if event.get("kind") == "collision" and "ego" in event.get("actors", [])}
         names = [name for name in names if name in partners]
@@ -245,7 +245,7 @@ def interaction_sentence(interaction: FailureInteraction, known: Optional[Elemen
     said = {action for who, action in known.actions if who == kind}
     placed = {relation for who, relation, _ in known.relations if who == kind}
     moves = list(interaction.manoeuvres or ())
-    collided = interaction.failure_type == "collision"
+    collided = is_contact(interaction.failure_type)
     relation = {"same_lane": "same_lane", "left": "left_of", "right": "right_of"}.get(interaction.side)
     if moves and set(moves) & said or not moves and relation in placed:
         return f"The ego vehicle collides with the {kind}." if collided and Action.COLLIDE not in said else ""
