@@ -699,6 +699,122 @@ def test_the_file_load_check_sees_a_module_loaded_by_path():
     assert [line.partition(":")[0] for line in _file_loads(tree)] == ["3", "5", "7", "8"]
 
 
+_LOADING_FACILITIES = frozenset({"importlib", "pkgutil", "runpy", "pydoc", "zipimport", "pkg_resources"})
+"""The standard library's (and setuptools') modules that load modules by a name or a path given at run time, or
+hand out entry points that do. Importing one at all (any of its submodules, any name from it) is a module loader
+the import rules cannot read past, whatever is then called."""
+_ENTRY_POINT_NAMES = frozenset({"EntryPoint", "EntryPoints", "entry_points", "iter_entry_points", "load_entry_point",
+                                "load_env_creator"})
+"""Names that reach an entry point (whose ``.load()`` imports the module its value names) or a library's loader of
+``module:attribute`` strings (Gymnasium's ``load_env_creator``), however they were imported."""
+
+MODULE_LOADERS: Dict[str, Tuple[frozenset, str]] = {
+    "dv2s_gym": (frozenset({"importlib"}), "the package's lazy names: import_module of a literal table (_LAZY)"),
+    "dv2s_gym.regress": (frozenset({"importlib"}), "the package's lazy names: import_module of a literal table"),
+    "policies": (frozenset({"importlib"}), "the package's lazy names: import_module of a literal table (_HOMES)"),
+    "dv2s_gym.workers.backends": (frozenset({"importlib"}), "worker bootstrap: the optional Ray pool, imported "
+                                                             "only when that backend is chosen"),
+    "dv2s_gym.mining.miner": (frozenset({"importlib.util"}), "find_spec('verifai'): whether the mining extra is "
+                                                             "installed, nothing loaded"),
+    "envs.scenic_imports": (frozenset({"importlib"}), "worker bootstrap: preloads Scenic's modules (a literal "
+                                                      "list) before the first compile"),
+    "envs.jail_worker": (frozenset({"importlib"}), "worker bootstrap: the jailed simulator loads the driver its "
+                                                   "caller names (module:attribute)"),
+    "scenario_bank.jail.zygote_server": (frozenset({"importlib"}), "worker bootstrap: the zygote imports the "
+                                                                    "worker module its client names"),
+    "scenario_bank.plugins": (frozenset({"importlib"}), "the plug-in loader: imports the user's plug-in modules"),
+    "policies.registry": (frozenset({"importlib"}), "the registry's module:attribute resolver (policy specs)"),
+    "policies.run_identity": (frozenset({"importlib.util", "importlib.metadata"}),
+                              "identity: find_spec of the modules a spec names, to hash their files, and the "
+                              "installed version"),
+    "policies.training.card": (frozenset({"importlib.metadata"}), "identity: the installed packages' versions "
+                                                                  "recorded in a model card"),
+    "scenario_bank.scenic_parse": (frozenset({"importlib.metadata"}), "identity: Scenic's installed version"),
+    "scenario_bank.sandbox": (frozenset({"importlib.metadata"}), "identity: the simulator code's installed versions "
+                                                                 "in the cache key"),
+}
+"""The product modules that import a module-loading facility (:data:`_LOADING_FACILITIES`), each with the
+facilities it imports and why; no other product module imports one or names an entry point."""
+
+
+def _facility_of(name: str) -> Optional[str]:
+    """``importlib.metadata`` for ``importlib.metadata.version``, ``importlib`` for ``importlib``; None for a module
+    that is no loading facility."""
+    parts = name.split(".")
+    if parts[0] not in _LOADING_FACILITIES:
+        return None
+    return ".".join(parts[:2]) if len(parts) > 1 and parts[1] in ("util", "metadata", "machinery", "resources",
+                                                                   "abc") else parts[0]
+
+
+def module_loading_facilities(tree: ast.AST) -> Dict[str, List[str]]:
+    """Facility (``importlib``, ``importlib.metadata``, ..., or ``entry point``) -> ``"line: code"`` of each place a
+    module imports one (an ``import``/``from`` statement anywhere, ``__import__``/``import_module`` of its literal
+    name) or names an entry point (:data:`_ENTRY_POINT_NAMES`)."""
+    found: Dict[str, List[str]] = {}
+
+    def add(facility: Optional[str], node: ast.AST) -> None:
+        if facility:
+            found.setdefault(facility, []).append(f"{node.lineno}: {ast.unparse(node).splitlines()[0]}")
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                add(_facility_of(alias.name), node)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            base = _facility_of(node.module)
+            for alias in node.names:
+                add(_facility_of(f"{node.module}.{alias.name}") or base, node)
+                add("entry point" if alias.name in _ENTRY_POINT_NAMES else None, node)
+        elif isinstance(node, ast.Call) and _base_name(node.func) in ("__import__", "import_module") and node.args \
+                and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str):
+            add(_facility_of(node.args[0].value), node)
+        elif isinstance(node, (ast.Name, ast.Attribute)) and isinstance(node.ctx, ast.Load) \
+                and (getattr(node, "id", None) or getattr(node, "attr", None)) in _ENTRY_POINT_NAMES:
+            add("entry point", node)
+    return found
+
+
+def test_only_the_listed_modules_import_a_module_loading_facility():
+    """A module-loading facility (``importlib`` and its parts, ``pkgutil``, ``runpy``, ``pydoc``, an entry point's
+    ``.load()``) loads what no import rule reads: the product imports one only in the modules of
+    :data:`MODULE_LOADERS` (the plug-in loader, the registry's resolver, worker bootstraps, identity code), and each
+    of them imports exactly the facilities listed."""
+    found = {module: frozenset(uses) for module, path in sorted(_modules().items())
+             if (uses := module_loading_facilities(_parsed(path)))}
+    listed = {module: facilities for module, (facilities, _) in MODULE_LOADERS.items()}
+    assert found == listed, "module-loading facilities imported beyond MODULE_LOADERS (import the module by name, " \
+        "or list it with the reason): " + "; ".join(
+            f"{module}: {sorted(found.get(module, ()))} imported, {sorted(listed.get(module, ()))} listed"
+            for module in sorted(set(found) | set(listed)) if found.get(module) != listed.get(module))
+
+
+@pytest.mark.parametrize("planted, facility", [
+    ("import importlib.metadata\n\n\ndef _planted():\n    return importlib.metadata.EntryPoint(name='x', "
+     "value='dv2s_gymXloop.run:run_loop'.replace('X', '.'), group='g').load()\n", "importlib.metadata"),
+    ("from importlib.metadata import EntryPoint as _E\n\n\ndef _planted(v):\n    return _E('x', v, 'g').load()\n",
+     "importlib.metadata"),
+    ("def _planted(name):\n    import importlib\n    return importlib.import_module(name)\n", "importlib"),
+    ("def _planted(name):\n    return __import__('importlib').import_module(name)\n", "importlib"),
+    ("import pkgutil as _p\n\n\ndef _planted(name):\n    return _p.resolve_name(name)\n", "pkgutil"),
+    ("from runpy import run_module as _r\n\n\ndef _planted(name):\n    return _r(name)\n", "runpy"),
+    ("def _planted(name):\n    import pydoc\n    return pydoc.locate(name)\n", "pydoc"),
+    ("from gymnasium.envs import registration\n\n\ndef _planted(name):\n"
+     "    return registration.load_env_creator(name)\n", "entry point"),
+    ("def _planted(eps):\n    return [ep.load() for ep in eps.entry_points(group='g')]\n", "entry point"),
+])
+def test_the_loader_facility_rule_sees_a_facility_planted_in_layer_one(tmp_path, planted, facility):
+    """A copy of ``scenario_bank/story.py`` (layer 1, which imports no loading facility) with a loader appended:
+    the facility is found on the planted lines."""
+    target = ROOT / "scenario_bank" / "story.py"
+    source = target.read_text(encoding="utf-8")
+    assert not module_loading_facilities(_parsed(target))
+    found = module_loading_facilities(ast.parse(source + "\n\n" + planted))
+    first = len((source + "\n\n").splitlines()) + 1
+    lines = [line for planted_lines in found.values() for line in planted_lines]
+    assert facility in found and all(int(line.partition(":")[0]) >= first for line in lines), found
+
+
 def test_the_loader_check_sees_computed_and_indirect_loads():
     tree = ast.parse(textwrap.dedent('''
         import importlib
