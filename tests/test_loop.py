@@ -17,6 +17,7 @@ from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.loop.heldout import HeldOutStore, evaluate_heldout, paired_summary
 from dv2s_gym.loop import arms, measures
 from dv2s_gym.loop.arms import fine_tune_weights
+from dv2s_gym.loop.comparisons import UNTOUCHED_BANK
 from dv2s_gym.loop.settings import LoopError
 from dv2s_gym.loop.record import FinalVsStart, HeldOutComparison, RoundRecord
 from dv2s_gym.loop.split import family_of, split_by_family
@@ -552,8 +553,7 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     untouched = steps["untouched"]
     assert set(untouched["policies"]) == {"start", "fine_tuned", "control"}
     first, second = stand.regressions[:2]  # the untouched set: never the loop's bank
-    assert first["bank_dir"] == second["bank_dir"] == str(__import__("dv2s_gym.loop.run", fromlist=["x"])
-                                                           .UNTOUCHED_BANK)
+    assert first["bank_dir"] == second["bank_dir"] == str(UNTOUCHED_BANK)
     assert second["candidate"] == report.rounds[0].to_dict()["control_policy"] and second["baseline_role"] == "candidate"
     assert any("[6/9] control" in line for line in lines)
     assert set(steps["regress"]["held_out_parents"]) == set(split["held_out_families"])
@@ -770,7 +770,6 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
 def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences():
     from pathlib import Path
 
-    from dv2s_gym.loop.comparisons import UNTOUCHED_BANK
     from scenario_bank.bank import Bank
 
     bank = Bank(UNTOUCHED_BANK)
