@@ -13,7 +13,9 @@ loaders, however spelled (a string naming a loader, ``__builtins__``, ``vars(imp
 (``"pkg.mod"``, ``"pkg.mod:attr"``, ``"pkg.mod.attr"``, ``"-mpkg.mod"``, a ``"pkg."`` prefix) is an edge
 (:func:`modules_named_in_strings`: ``pydoc.locate``, ``mock.patch``, ``importlib.resources.files``, a forkserver
 preload list...), as is the ``dv2s`` console script started in a child process (``dv2s_gym.cli``); a string that
-names a package without loading it is listed in :data:`NAMED_NOT_LOADED` with the reason.
+names a package without loading it is listed in :data:`NAMED_NOT_LOADED` with the reason. Beyond the spellings,
+importing a module-loading facility at all (``importlib`` and its parts, ``pkgutil``, ``runpy``, ``pydoc``, an entry
+point) is refused outside the modules :data:`MODULE_LOADERS` lists with the reason.
 """
 
 from __future__ import annotations
