@@ -2918,7 +2918,7 @@ _BEV_NOT_CONVERTED = "the bird's-eye analyzer's actors and events: not converted
 _BEV_BLOBS = "the tracker's blobs and tracks (b.kind, trk.kind): its own vocabulary of colours and blob kinds"
 KINDS_SPELLED_OUT: Dict[str, Tuple[int, str]] = {
     "dv2s_gym/pipeline/dra/bev/analyze.py": (11, _BEV_BLOBS),
-    "dv2s_gym/pipeline/dra/bev/events.py": (6, _BEV_NOT_CONVERTED),
+    "dv2s_gym/pipeline/dra/bev/events.py": (1, _BEV_BLOBS),
     "dv2s_gym/pipeline/dra/bev/language.py": (5, _BEV_NOT_CONVERTED),
 }
 """The modules of :data:`KINDS_BY_ENUM` whose comparisons still spell out an actor kind or role, with how many and
@@ -3136,7 +3136,7 @@ def vocabulary_spelled_out(files: Dict[str, Path], words: frozenset) -> Dict[str
 
 VOCABULARY_SPELLED_OUT: Dict[str, Tuple[int, str]] = {
     "dv2s_gym/pipeline/dra/bev/analyze.py": (7, _BEV_BLOBS),
-    "dv2s_gym/pipeline/dra/bev/events.py": (32, _BEV_NOT_CONVERTED),
+    "dv2s_gym/pipeline/dra/bev/events.py": (2, _BEV_BLOBS + "; 'oncoming' is a flag of its actor records"),
     "dv2s_gym/pipeline/dra/bev/language.py": (82, _BEV_NOT_CONVERTED),
     "dv2s_gym/pipeline/semantics/road.py": (4, "words of the description's text ('highway', 'motorway') and keys "
                                                "of its features ('ramp', 'shoulder'), not the vocabulary"),
