@@ -14,6 +14,7 @@ from typing import Any, Dict, List, Sequence, Union
 
 from dv2s_gym.loop import run as loop_module
 from dv2s_gym.loop.record import LoopReportBody
+from dv2s_gym.loop.settings import LoopSettings
 from dv2s_gym.mining import miner as miner_module
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
@@ -98,7 +99,7 @@ def run_loop(policy: str = "dv2s-ppo", *, miner: Any = None, out: Any = loop_mod
     from unittest import mock
 
     options = {"out": out, "progress": progress, **({"log": log} if log is not None else {})}
-    loop_settings = loop_module.LoopSettings(**settings)
+    loop_settings = LoopSettings(**settings)
     if miner is None:
         return loop_module.run_loop(policy, loop_settings, **options)
     with mock.patch.object(miner_module, "mine", miner):

@@ -15,8 +15,10 @@ import pytest
 from scenario_bank.records import HeldOutEpisode
 from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.loop.heldout import HeldOutStore, evaluate_heldout, paired_summary
-from dv2s_gym.loop import arms, run as loop_module
-from dv2s_gym.loop.run import LoopError, fine_tune_weights
+from dv2s_gym.loop import arms, measures
+from dv2s_gym.loop.arms import fine_tune_weights
+from dv2s_gym.loop.comparisons import UNTOUCHED_BANK
+from dv2s_gym.loop.settings import LoopError
 from dv2s_gym.loop.record import FinalVsStart, HeldOutComparison, RoundRecord
 from dv2s_gym.loop.split import family_of, split_by_family
 from dv2s_gym.loop.state import round_spec
@@ -95,7 +97,7 @@ def test_family_split_keeps_every_family_on_its_side_across_two_rounds(seed):
 
 
 def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
 
     def records(outcomes):
         return [{"scenario": f"s{i % 4}", "seed": i, "failed": f, "error": None} for i, f in enumerate(outcomes)]
@@ -119,7 +121,7 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
 def test_the_heldout_report_names_entries_the_starting_policy_mostly_passes():
     """A kept failure is exact at its own seed only: held out at other seeds, the start may pass most of it, and
     the report says so beside the table instead of leaving the reader to count."""
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
     from dv2s_gym.loop.report_text import _heldout_lines
 
     def records(failed_by_scenario):
@@ -135,7 +137,7 @@ def test_the_heldout_report_names_entries_the_starting_policy_mostly_passes():
 
 
 def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_of_a_family_are_not_independent():
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
     from dv2s_gym.loop.report_text import _heldout_lines
 
     families, start, tuned = {}, [], []
@@ -163,7 +165,7 @@ def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_
 
 
 def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
 
     def records(outcomes):
         return [{"scenario": f"s{i % 2}", "seed": i, "failed": f, "error": None} for i, f in enumerate(outcomes)]
@@ -202,7 +204,7 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
 def test_the_control_test_needs_the_minimums_and_the_floor_on_its_own_pairs():
     """A control that errored on all but one episode per family: 20 tested pairs against the start, 4 against the
     control. The control test does not run and the round is not accepted."""
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
     from dv2s_gym.loop.verdict import judge_round
 
     families = {f"F{i}_replay": f"F{i}" for i in range(4)}
@@ -551,8 +553,7 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     untouched = steps["untouched"]
     assert set(untouched["policies"]) == {"start", "fine_tuned", "control"}
     first, second = stand.regressions[:2]  # the untouched set: never the loop's bank
-    assert first["bank_dir"] == second["bank_dir"] == str(__import__("dv2s_gym.loop.run", fromlist=["x"])
-                                                           .UNTOUCHED_BANK)
+    assert first["bank_dir"] == second["bank_dir"] == str(UNTOUCHED_BANK)
     assert second["candidate"] == report.rounds[0].to_dict()["control_policy"] and second["baseline_role"] == "candidate"
     assert any("[6/9] control" in line for line in lines)
     assert set(steps["regress"]["held_out_parents"]) == set(split["held_out_families"])
@@ -581,7 +582,7 @@ def test_held_out_episodes_the_reference_driver_does_not_pass_are_left_out_count
     evaluated = {role: episodes for role, _, episodes in stand.evaluations}
     everything = evaluated["reference"]  # the reference driver runs every held-out episode, first
     assert [role for role, _, _ in stand.evaluations][0] == "reference"
-    assert [policy for role, policy, _ in stand.evaluations if role == "reference"] == [loop_module.REFERENCE_DRIVER]
+    assert [policy for role, policy, _ in stand.evaluations if role == "reference"] == [measures.REFERENCE_DRIVER]
     assert len(everything) == len(steps["split"]["held_out"]) * WIRING["k_eval"]
     failing = everything[:WIRING["k_eval"] + 1]
     gate = steps["reference"]
@@ -606,7 +607,7 @@ def test_reference_gate_counts_failures_and_errors_and_names_families_left_out_e
                     {"scenario": "a1", "seed": 2, "failed": None, "failure": None, "error": "boom"},
                     {"scenario": "b1", "seed": 1, "failed": True, "failure": {"type": "collision"}, "error": None},
                     {"scenario": "b2", "seed": 1, "failed": False, "failure": None, "error": None}])
-    gate = loop_module.reference_gate(records, {"a1": "A", "b1": "B", "b2": "B"})
+    gate = measures.reference_gate(records, {"a1": "A", "b1": "B", "b2": "B"})
     assert gate.to_dict()["excluded"] == [["a1", 1], ["a1", 2], ["b1", 1]] and gate.to_dict()["kept"] == 1
     assert (gate.to_dict()["failed"], gate.to_dict()["errored"]) == (2, 1)
     assert gate.to_dict()["excluded_families"] == ["A"]  # B keeps a passed episode
@@ -615,14 +616,14 @@ def test_reference_gate_counts_failures_and_errors_and_names_families_left_out_e
 
     text = reference_gate_text(gate)
     assert "3 of 4 held-out episodes left out" in text and "2 failed, 1 errored" in text and "entirely: A" in text
-    assert "none left out" in reference_gate_text(loop_module.reference_gate(records[3:], {}))
+    assert "none left out" in reference_gate_text(measures.reference_gate(records[3:], {}))
 
 
 def test_the_loops_reference_driver_is_the_dagger_teacher_and_the_miners_reference():
     from dv2s_gym.mining.settings import MineSettings
     from policies.dagger_config import DaggerConfig
 
-    assert loop_module.REFERENCE_DRIVER == DaggerConfig().reference == MineSettings().reference
+    assert measures.REFERENCE_DRIVER == DaggerConfig().reference == MineSettings().reference
 
 
 def test_no_member_of_a_held_out_family_reaches_either_arm(tmp_path, monkeypatch):
@@ -645,7 +646,6 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
     that family: neither arm trains on it, and the arm records root families only."""
     import shutil
 
-    from dv2s_gym.loop import run as loop_module
     from scenario_bank.bank import Bank
 
     shipped = Bank()
@@ -677,9 +677,9 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
     assert set(captured) == {"urban_lead_vehicle_stopped", "m_lead"}
     assert record.to_dict()["families"] == ["urban_lead_vehicle_stopped"]
     # the same draw outside the loop (the fine-tuning sweep's): the fine-tuned arm's, and the control's without m_lead
-    weights, facts = loop_module.arm_weights(str(bank), excluded, 0.5, with_mined=True)
+    weights, facts = arms.arm_weights(str(bank), excluded, 0.5, with_mined=True)
     assert weights == captured and facts["mined_upweighted"] == 1
-    weights, facts = loop_module.arm_weights(str(bank), excluded, 0.5, with_mined=False)
+    weights, facts = arms.arm_weights(str(bank), excluded, 0.5, with_mined=False)
     assert weights == {"urban_lead_vehicle_stopped": 1.0}
     assert facts["mined_left_out"] == 1 and facts["families"] == ["urban_lead_vehicle_stopped"]
 
@@ -770,7 +770,6 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
 def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences():
     from pathlib import Path
 
-    from dv2s_gym.loop.run import UNTOUCHED_BANK
     from scenario_bank.bank import Bank
 
     bank = Bank(UNTOUCHED_BANK)
@@ -838,7 +837,7 @@ def test_a_round_policy_read_back_from_loop_json_must_be_that_rounds_own_checkpo
 
 # --------------------------------------------------------------------------- exact replays as mined scenarios
 def test_mined_entries_include_the_exact_replays_with_their_parent(tmp_path):
-    from dv2s_gym.loop.run import mined_entries
+    from dv2s_gym.loop.mined import mined_entries
 
     run_dir = tmp_path / "mine"
     run_dir.mkdir()
@@ -1230,7 +1229,7 @@ def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected
 
 
 def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_minimum():
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
     from dv2s_gym.loop.verdict import judge_round
 
     families = {"a1": "famA", "b1": "famB", "c1": "famC"}
@@ -1261,7 +1260,7 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
     `before` step is not run again there, so its pair is in no rate or test, as the report says."""
     import dv2s_gym.loop.heldout as heldout
     from dv2s_gym.loop.errored import errored_episodes
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
     from scenario_bank.records import HeldOutEpisode
 
     runs = []

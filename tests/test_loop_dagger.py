@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from scenario_bank.run_identity import RunIdentityError
-from dv2s_gym.loop.run import LoopError
+from dv2s_gym.loop.settings import LoopError
 from envs.dv2s_env import DV2SEnv
 from cli_helpers import run
 from loop_helpers import FakeMiner, run_loop

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from dv2s_gym.loop.record import LoopReportBody, RecordedLoopSettings, RoundRecord
 from dv2s_gym.loop.report import final_vs_start, write_loop_reports
-from dv2s_gym.loop.settings import LoopSettings
+from dv2s_gym.loop.settings import LoopError, LoopSettings
 from dv2s_gym.regress.records import RegressReport
 from dv2s_gym.regress.report import write_json
 from regress_report_data import report_from_json
@@ -187,7 +187,7 @@ def test_a_round_begun_from_another_policy_than_the_rounds_before_it_recommend_i
 
     record = {"round": 2, "policy": "p0", "steps": {"mine": {"kept": []}}}  # begun from p0 ...
     loop = SimpleNamespace(state=SimpleNamespace(round=lambda number: RoundRecord.from_dict(record)), out=tmp_path)
-    with pytest.raises(loop_module.LoopError, match="round 2 .* was begun from p0, not from p1.*--out"):
+    with pytest.raises(LoopError, match="round 2 .* was begun from p0, not from p1.*--out"):
         loop_module._run_round(loop, 2, "p1")  # ... where round 1 recommends p1
     assert record["policy"] == "p0" and list(record["steps"]) == ["mine"]
 

@@ -14,7 +14,7 @@ import policies.training.scenario_envs as scenario_envs
 from cli_helpers import one_line_error, run
 from scenario_bank.records import HeldOutEpisode
 from scenario_bank.run_identity import RunIdentityError
-from dv2s_gym.loop.run import DEFAULTS, LoopError
+from dv2s_gym.loop.settings import DEFAULTS, LoopError
 from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT

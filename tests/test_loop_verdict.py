@@ -107,7 +107,7 @@ def _episodes(failing):
 
 
 def _judged(before, after, control, regress="PASS", **minimums):
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
 
     families = {f"f{f}_s{s}": f"family_{f}" for f in range(4) for s in range(2)}
     summary = heldout_comparison(_episodes(before), _episodes(after), None if control is None else _episodes(control),
@@ -192,7 +192,7 @@ def test_the_evidence_floor_is_the_fewest_pairs_an_exact_mcnemar_test_can_be_sig
 def test_minimums_of_zero_do_not_let_a_single_held_out_pair_be_judged():
     """``--min-heldout-episodes 0 --min-heldout-families 0``: one tested pair (both policies pass) is too small to
     judge, not an ACCEPTED policy; the tests do not run and the verdict says why."""
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
 
     one = [{"scenario": "f0_s0", "seed": 0, "failed": False, "error": None}]
     summary = heldout_comparison(held(one), held(one), held(one), min_episodes=0, families={"f0_s0": "family_0"}, min_families=0)
@@ -285,7 +285,7 @@ def test_a_harm_in_one_family_the_gate_calls_inconclusive_is_not_accepted():
     markdown = render_markdown(written_report(_report(record)))
     assert "**harm not ruled out in family_3**" in markdown and "family_3 +37.5 pp" in markdown
     # the same round judged at a margin the harm stays within is accepted
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
 
     families = {f"f{f}_s{s}": f"family_{f}" for f in range(4) for s in range(2)}
     wide = heldout_comparison(_episodes(lambda f, s, seed: False), _episodes(after), None, min_episodes=8,
@@ -336,7 +336,7 @@ def test_non_inferiority_p_is_below_the_level_exactly_when_the_interval_is_below
 def _accepted_round():
     """A round every test accepts: 20 held-out pairs from 4 families, the fine-tuned policy failing none the start
     or the control passed."""
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
 
     families = {f"F{i}_replay": f"F{i}" for i in range(4)}
     before = [{"scenario": n, "seed": s, "failed": True, "error": None} for n in families for s in range(5)]
@@ -403,7 +403,7 @@ def test_loop_help_names_the_family_harm_rule_and_the_untouched_set(capsys):
 def _one_family_round(fine_tuned_only, *, pairs=50, other_only=0, margin=None):
     """A round with one held-out family ``F`` of ``pairs`` paired episodes and no control: the fine-tuned policy fails
     the first ``fine_tuned_only`` episodes alone, the starting policy the next ``other_only`` alone."""
-    from dv2s_gym.loop.run import heldout_comparison
+    from dv2s_gym.loop.measures import heldout_comparison
 
     before = [{"scenario": "F_replay", "seed": s, "failed": fine_tuned_only <= s < fine_tuned_only + other_only,
                "error": None} for s in range(pairs)]

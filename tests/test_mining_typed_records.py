@@ -162,7 +162,7 @@ def test_every_step_of_a_round_is_a_typed_record():
 
 def test_the_mined_entries_are_typed_records():
     from dv2s_gym.loop import record as loop_record
-    from dv2s_gym.loop.run import mined_entries
+    from dv2s_gym.loop.mined import mined_entries
     from dv2s_gym.loop.replays import replay_entries
     from dv2s_gym.loop.split import family_of, family_groups, split_by_family
 

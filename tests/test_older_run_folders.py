@@ -11,7 +11,7 @@ import pytest
 from mining_helpers import SpaceBuilt, recorded_run_folder
 from loop_helpers import run_loop
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.loop.run import STATE_VERSION
+from dv2s_gym.loop.state import STATE_VERSION
 from dv2s_gym.loop.settings import LoopError
 from dv2s_gym.mining.miner import SETTINGS_VERSION, mine
 from dv2s_gym.mining.settings import MineSettings

@@ -52,7 +52,7 @@ def test_a_folder_of_one_kind_refuses_a_run_of_another(tmp_path, held, asked):
 
 
 def test_each_run_kind_names_its_record_in_the_table():
-    from dv2s_gym.loop.run import STATE_SCHEMA
+    from dv2s_gym.loop.state import STATE_SCHEMA
     from dv2s_gym.mining.miner import SETTINGS_FILE, SETTINGS_SCHEMA
     from dv2s_gym.regress import store
     from policies.training import run_record

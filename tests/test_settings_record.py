@@ -9,7 +9,7 @@ import json
 from dv2s_gym.cli import build_parser
 from dv2s_gym.cli.loop import _VALUED, loop_settings
 from dv2s_gym.mining import miner
-from dv2s_gym.loop import run as loop
+from dv2s_gym.loop import state
 from dv2s_gym.loop.settings import LoopSettings
 from dv2s_gym.mining.monitors import MonitorSettings
 from dv2s_gym.mining.settings import MineSettings
@@ -22,7 +22,7 @@ def _names(cls) -> set:
 
 
 def test_loop_identity_is_every_setting_but_rounds_and_workers():
-    assert set(loop.IDENTITY) == {"policy"} | _names(LoopSettings) - {"rounds", "workers"}
+    assert set(state.IDENTITY) == {"policy"} | _names(LoopSettings) - {"rounds", "workers"}
 
 
 def test_mine_identity_is_every_recorded_setting_but_budget():

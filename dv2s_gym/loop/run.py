@@ -15,11 +15,11 @@ a. **mine**: :func:`dv2s_gym.mining.miner.mine` runs ``P`` on sampled scenes of 
 b. **split**: the newly kept scenarios (converted scripts and exact replays) are split by *family* (their parent bank scenario,
    :func:`dv2s_gym.loop.split.split_by_family`) into a fine-tuning part and a held-out part,
    deterministically from the seed; a family held out once stays held out;
-c. **reference**, then **before**: the reference driver (:data:`REFERENCE_DRIVER`, the DAgger teacher and the
-   miner's reference) drives every held-out episode first; an episode it does not pass (any failure of the
-   monitors, or an error) is left out of every held-out rate and test, counted and named
-   (:func:`reference_gate`: no imitation of the reference can fix a scene the reference fails, so its pair
-   measures nothing); ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds each
+c. **reference**, then **before**: the reference driver (:data:`~dv2s_gym.loop.measures.REFERENCE_DRIVER`, the
+   DAgger teacher and the miner's reference) drives every held-out episode first; an episode it does not pass (any
+   failure of the monitors, or an error) is left out of every held-out rate and test, counted and named
+   (:func:`~dv2s_gym.loop.measures.reference_gate`: no imitation of the reference can fix a scene the reference
+   fails, so its pair measures nothing); ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds each
    (``EVAL_SEED_BASE + i``, never a training seed): failure rate (the miner's monitors) with
    a Wilson interval; fewer than ``min_heldout_episodes`` held-out episodes is said loudly and
    the round reports rates but no drop and no test;
@@ -43,7 +43,8 @@ e. **after**: the fine-tuned policy and the control run on the same held-out epi
    (scenario-bootstrap interval), exact two-sided McNemar p fine-tuned vs start and fine-tuned
    vs control;
 e'. **untouched**: start, control and fine-tuned run on the scenario set the loop never mines or
-   fine-tunes on (:data:`UNTOUCHED_BANK`: scripts written by others for Scenic's CARLA model),
+   fine-tunes on (:data:`~dv2s_gym.loop.comparisons.UNTOUCHED_BANK`: scripts written by others for Scenic's CARLA
+   model),
    ``untouched_seeds`` seeds each, judged by :func:`dv2s_gym.regress.runner.run_regression`
    (failure rates, stalls apart, mean speed; fine-tuned vs start and control vs fine-tuned);
 f. **regress**: :func:`dv2s_gym.regress.runner.run_regression` new against old on the starting
@@ -75,15 +76,10 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
 
 from dv2s_gym.loop import report as loop_report
-from dv2s_gym.loop.arms import arm_weights, fine_tune_weights
-from dv2s_gym.loop.comparisons import UNTOUCHED_BANK, evaluate_untouched, untouched_settings
-from dv2s_gym.loop.measures import REFERENCE_DRIVER, heldout_comparison, reference_gate, underpowered
-from dv2s_gym.loop.mined import mined_entries
 from dv2s_gym.loop.record import LoopReportBody, LoopStart, RecordedLoopSettings, RoundRecord, recorded
 from dv2s_gym.loop.report import write_loop_reports
-from dv2s_gym.loop.settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
-from dv2s_gym.loop.state import (HOLDOUT_BY, IDENTITY, IN_FOLDER, REFERENCE_FINGERPRINT, STAGE_NAMES, STATE_SCHEMA,
-                                 STATE_VERSION, LoopState, RunningLoop, earlier_round_spec, working_bank)
+from dv2s_gym.loop.settings import LoopError, LoopSettings
+from dv2s_gym.loop.state import HOLDOUT_BY, STAGE_NAMES, LoopState, RunningLoop, earlier_round_spec, working_bank
 from dv2s_gym.loop.steps import (Timed, log_errored, log_mined, log_round, mine_plan, mine_step, skip_round,
                                  split_step, tune_and_measure)
 from dv2s_gym.loop.verdict import Recommendation, evidence_floor_note, recommendation
@@ -94,12 +90,7 @@ from scenario_bank.bank import Bank
 from scenario_bank.run_identity import BANK_IDENTITY, bank_identity, check_bank_unchanged
 from policies.run_identity import RESUME_FINGERPRINT, resume_fingerprint
 
-__all__ = ["LoopError", "LoopReport", "LoopSettings", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries",
-           "fine_tune_weights", "arm_weights", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES",
-           # defined in the loop's parts, importable here as before
-           "IDENTITY", "HOLDOUT_BY", "REFERENCE_FINGERPRINT", "STATE_SCHEMA", "STATE_VERSION", "IN_FOLDER",
-           "UNTOUCHED_BANK", "untouched_settings", "evaluate_untouched", "REFERENCE_DRIVER", "reference_gate",
-           "underpowered", "heldout_comparison"]
+__all__ = ["LoopReport", "run_loop", "DEFAULT_OUT"]
 
 DEFAULT_OUT = "out/loop"
 """Where ``dv2s loop`` writes when ``--out`` is not given (rerunning resumes it)."""
@@ -218,8 +209,9 @@ def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool,
 def _recorded_settings(policy: str, settings: LoopSettings, workers: int, env_config: Dict[str, Any],
                        fine_tune_config: Dict[str, Any]) -> Dict[str, Any]:
     """The ``settings`` of ``loop.json``: :meth:`LoopSettings.recorded` with the policy, the resolved number of
-    workers, how mined scenarios are held out and the env configs (the keys :data:`IDENTITY` names are the loop's
-    identity) and the starting policy's fingerprint (:func:`~policies.run_identity.resume_fingerprint`)."""
+    workers, how mined scenarios are held out and the env configs (the keys :data:`~dv2s_gym.loop.state.IDENTITY`
+    names are the loop's identity) and the starting policy's fingerprint
+    (:func:`~policies.run_identity.resume_fingerprint`)."""
     return {"policy": policy, **settings.recorded(), "workers": workers, "holdout_by": HOLDOUT_BY,
             "env_config": env_config, "fine_tune_env_config": fine_tune_config,
             RESUME_FINGERPRINT: resume_fingerprint(policy)}

@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, List, Mapping, Optional, Tuple
 
+from dv2s_gym.pipeline.semantics.parsed import Lane
 from dv2s_gym.pipeline.semantics.trace import ego_frame, elements_from_trace, trace_actor_kind
 from scenario_bank.elements import Action, ActorKind, Elements, Relation
 from scenario_bank.failure_types import failure_type, is_contact
@@ -246,7 +247,8 @@ def interaction_sentence(interaction: FailureInteraction, known: Optional[Elemen
     placed = {relation for who, relation, _ in known.relations if who == kind}
     moves = list(interaction.manoeuvres or ())
     collided = is_contact(interaction.failure_type)
-    relation = {"same_lane": "same_lane", "left": "left_of", "right": "right_of"}.get(interaction.side)
+    relation = {Relation.SAME_LANE: Relation.SAME_LANE, Lane.LEFT: Relation.LEFT_OF, Lane.RIGHT: Relation.RIGHT_OF}.get(
+        interaction.side)
     if moves and set(moves) & said or not moves and relation in placed:
         return f"The ego vehicle collides with the {kind}." if collided and Action.COLLIDE not in said else ""
     subject = _ARTICLE.get(kind, f"A {kind}")
@@ -255,7 +257,7 @@ def interaction_sentence(interaction: FailureInteraction, known: Optional[Elemen
     if kind == ActorKind.PEDESTRIAN or Action.CROSS in moves:
         text = f"{subject} crosses the road in front of the ego vehicle."
     elif Action.CUT_IN in moves or Action.MERGE in moves:
-        lane = f" from the lane to the {side} of the ego vehicle" if side in ("left", "right") else ""
+        lane = f" from the lane to the {side} of the ego vehicle" if side in (Lane.LEFT, Lane.RIGHT) else ""
         text = f"{subject}{lane} cuts into the ego's lane{where}."
     elif moves and moves[0] in _LANE_CHANGES:
         direction = moves[0].rsplit("_", 1)[1]

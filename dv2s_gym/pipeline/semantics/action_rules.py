@@ -8,7 +8,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 from dv2s_gym.pipeline.semantics.lexicon import COMPILED_ACTIONS, NEGATION, SUDDEN, PASSIVE_HIT, LANE_WORD
 from dv2s_gym.pipeline.semantics.mentions import Mention, action_window, crossing_direction
-from dv2s_gym.pipeline.semantics.parsed import Entity, drift_side
+from dv2s_gym.pipeline.semantics.parsed import Entity, Lane, drift_side
 from dv2s_gym.pipeline.semantics.road import distance_m, time_s
 from scenario_bank.elements import CAN_DO, Action, ActorKind, Relation
 
@@ -217,11 +217,11 @@ class ActionRules:
                 owner.add_action("lane_change", sudden=sudden)
             return True
         side = LANE_WORD.get(d, d) if d in LANE_WORD else d
-        if d in ("left", "right") and "side" not in m.group(0):
+        if d in (Lane.LEFT, Lane.RIGHT) and "side" not in m.group(0):
             owner.add_action(f"lane_change_{d}", sudden=sudden, target=d)
-        elif side == "middle":
+        elif side == Lane.MIDDLE:
             owner.add_action("lane_change_pending", sudden=sudden, target="middle")
-        elif side in ("left", "right"):
+        elif side in (Lane.LEFT, Lane.RIGHT):
             owner.add_action(f"lane_change_{side}", sudden=sudden, target=side)
         return True
 

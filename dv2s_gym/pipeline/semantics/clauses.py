@@ -94,7 +94,7 @@ class ClauseReader:
     def _counts_add_up(self) -> None:
         """"Two vehicles: the ego and a bus" is two vehicles, not four: a generic plural group whose members are
         named after it in the same sentence is dropped."""
-        vehicles = ("ego", "car", "truck", "bus", "motorcycle", "bicycle")
+        vehicles = (ActorKind.EGO, ActorKind.CAR, ActorKind.TRUCK, ActorKind.BUS, ActorKind.MOTORCYCLE, ActorKind.BICYCLE)
         for group in [e for e in self.out.entities if e.attrs.get("generic")]:
             if group.actions or group.relations or any(j is group for e in self.out.entities for _, j in e.relations):
                 continue

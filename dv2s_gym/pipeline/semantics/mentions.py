@@ -21,7 +21,7 @@ from dv2s_gym.pipeline.semantics.lexicon import (
     CROSS_FROM,
     PREPOSITIONS,
 )
-from dv2s_gym.pipeline.semantics.parsed import Entity
+from dv2s_gym.pipeline.semantics.parsed import Entity, Lane
 from scenario_bank.elements import Action, ActorKind, Relation
 
 __all__ = [
@@ -217,11 +217,11 @@ def crossing_direction(clause: str, groups: Dict[str, Optional[str]]) -> Optiona
     if dm:
         return f"{dm.group('from')}_to_{dm.group('to')}"
     if groups.get("from"):
-        return f"{groups['from']}_to_{'right' if groups['from'] == 'left' else 'left'}"
+        return f"{groups['from']}_to_{'right' if groups['from'] == Lane.LEFT else 'left'}"
     fm = CROSS_FROM.search(clause)
-    if fm and (fm.group("from") or fm.group("from2")) in ("left", "right"):
+    if fm and (fm.group("from") or fm.group("from2")) in (Lane.LEFT, Lane.RIGHT):
         f = fm.group("from") or fm.group("from2")
-        return f"{f}_to_{'right' if f == 'left' else 'left'}"
+        return f"{f}_to_{'right' if f == Lane.LEFT else 'left'}"
     if fm and (fm.group("from") in ("far", "other", "opposite")):
         return "far_side"
     return None
@@ -249,11 +249,11 @@ def cut_in_lane_changes(e: Entity, rels: set) -> None:
                                                   "right" if Relation.RIGHT_OF in rels else None)
         if e.has("overtake") and e.detail("cut_in").get("back"):
             out_side = e.detail("overtake").get("side") or "left"
-            back_side = "right" if out_side == "left" else "left"
+            back_side = "right" if out_side == Lane.LEFT else "left"
             e.add_action(f"lane_change_{out_side}")
             e.add_action(f"lane_change_{back_side}")
-        elif side in ("left", "right") and not e.has("merge"):
-            e.add_action(f"lane_change_{'right' if side == 'left' else 'left'}")
+        elif side in (Lane.LEFT, Lane.RIGHT) and not e.has("merge"):
+            e.add_action(f"lane_change_{'right' if side == Lane.LEFT else 'left'}")
 
 
 class MentionReader:

@@ -16,6 +16,8 @@ from __future__ import annotations
 import re
 from typing import Any, Dict, List, Optional, Tuple
 
+from scenario_bank.elements import Road
+
 __all__ = ["road_features", "strip_absences", "speed_kph", "distance_m", "time_s", "VEHICLE_KINDS"]
 
 VEHICLE_KINDS = ["car", "truck", "bus", "motorcycle"]
@@ -87,14 +89,14 @@ def road_features(text: str, road: Optional[str]) -> Dict[str, Any]:
         if m and _count(m.group("n")):
             n = _count(m.group("n"))
             one_way = bool(re.search(r"\bone way\b", text))
-            motorway = m.group("what") in ("highway", "motorway", "freeway", "expressway") or road == "highway"
+            motorway = m.group("what") in ("highway", "motorway", "freeway", "expressway") or road == Road.HIGHWAY
             # a "four-lane road" is two lanes each way; a "three-lane motorway" gives its lanes per direction
             f["lanes"] = n if (one_way or motorway) else max(1, n // 2)
     if re.search(r"\bone way\b", text):
         f["one_way"] = True
     if re.search(r"\bmulti ?(?:ple )?lanes?\b(?! change)|\bmultilane\b|\bseveral lanes\b", text) or \
-            (f.get("lanes", 0) >= 2 and road != "highway"):
-        if road != "highway":
+            (f.get("lanes", 0) >= 2 and road != Road.HIGHWAY):
+        if road != Road.HIGHWAY:
             f["multi_lane"] = True
         elif "lanes" not in f:
             f["multi_lane"] = True

@@ -8,7 +8,7 @@ from typing import Optional
 from dv2s_gym.pipeline.semantics.lexicon import MOTOR, COLLISION_KINDS
 from dv2s_gym.pipeline.semantics.mentions import cut_in_side_from_relations, cut_in_lane_changes
 from dv2s_gym.pipeline.semantics.parsed import Entity, Lane
-from scenario_bank.elements import Action, ActorKind, Relation
+from scenario_bank.elements import Action, ActorKind, Relation, Road
 
 __all__ = ["SceneCompletion"]
 
@@ -39,11 +39,11 @@ class SceneCompletion:
                 continue
             else:
                 rels = {r for r, j in e.relations if j is other} | {r for r, j in other.relations if j is e}
-                if {e.kind, other.kind} & {"pedestrian", "bicycle", "obstacle"}:
+                if {e.kind, other.kind} & {ActorKind.PEDESTRIAN, ActorKind.BICYCLE, ActorKind.OBSTACLE}:
                     kind = "collide_side"
                 elif Relation.ONCOMING in rels:
                     kind = "collide_head_on"
-                elif rels & {"ahead_of", "behind", "same_lane"} and Relation.CROSSING_PATH not in rels:
+                elif rels & {Relation.AHEAD_OF, Relation.BEHIND, Relation.SAME_LANE} and Relation.CROSSING_PATH not in rels:
                     kind = "collide_rear_end"
                 else:
                     kind = "collide_side"
@@ -58,8 +58,8 @@ class SceneCompletion:
     def _absolute_lanes(self) -> None:
         """Absolute lanes of two actors give a relation (left lane vs the ego's middle lane: left_of)."""
         ego = self.out.ego
-        if ego is not None and ego.lane in ("left", "middle", "right"):
-            order = {"left": 0, "middle": 1, "right": 2}
+        if ego is not None and ego.lane in (Lane.LEFT, Lane.MIDDLE, Lane.RIGHT):
+            order = {Lane.LEFT: 0, Lane.MIDDLE: 1, Lane.RIGHT: 2}
             for e in self.out.entities:
                 if e is ego or e.lane not in order or e.kind == ActorKind.PEDESTRIAN:
                     continue
@@ -115,7 +115,7 @@ class SceneCompletion:
         side of the ego); unresolved when neither is known."""
         for i, (a, d) in enumerate(list(e.actions)):
             if a == "lane_change_pending":
-                direction = {"left": "right", "right": "left"}.get(e.lane or "")
+                direction = {Lane.LEFT: "right", Lane.RIGHT: "left"}.get(e.lane or "")
                 if direction is None and ego is not None and e is not ego:
                     for rel, j in e.relations:
                         if rel in (Relation.LEFT_OF, Relation.RIGHT_OF) and j is ego:
@@ -133,7 +133,7 @@ class SceneCompletion:
         for rel in e.attrs.pop("pending_relations", []):
             self.relate(e, rel, ego)
         rels = {r for r, j in e.relations if j is ego}
-        if e.lane == Lane.RAMP and not rels & {"left_of", "right_of"}:
+        if e.lane == Lane.RAMP and not rels & {Relation.LEFT_OF, Relation.RIGHT_OF}:
             self.relate(e, "right_of", ego)
             rels.add("right_of")
         return rels
@@ -142,7 +142,7 @@ class SceneCompletion:
         """Relations to the ego that ``e``'s kind, actions and other relations (``rels``) imply: a vehicle ahead
         and on no side is in the same lane, an obstacle in the lane is ahead, a crossing pedestrian, cyclist or
         animal is ahead and across the path, oncoming traffic crosses the path of an ego turning left."""
-        if e.kind in MOTOR and Relation.AHEAD_OF in rels and not rels & {"left_of", "right_of", "oncoming"} \
+        if e.kind in MOTOR and Relation.AHEAD_OF in rels and not rels & {Relation.LEFT_OF, Relation.RIGHT_OF, Relation.ONCOMING} \
                 and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
             self.relate(e, "same_lane", ego)
         if e.kind == ActorKind.OBSTACLE and Relation.SAME_LANE in rels:
@@ -170,7 +170,7 @@ class SceneCompletion:
         """Cross traffic at a junction: a vehicle from the left or right, not oncoming, not changing lanes, not
         joining the ego's way by a right turn, crosses the ego's path; so does an oncoming one turning left
         when the ego does not."""
-        if ego is None or self.out.road not in ("intersection", "t_junction", "three_way", "roundabout"):
+        if ego is None or self.out.road not in (Road.INTERSECTION, Road.T_JUNCTION, Road.THREE_WAY, Road.ROUNDABOUT):
             return
         for e in self.out.entities:
             if e is ego or e.kind not in MOTOR + (ActorKind.BICYCLE,):
@@ -178,7 +178,7 @@ class SceneCompletion:
             rels = {r for r, j in e.relations if j is ego}
             lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")
             joins = Relation.RIGHT_OF in rels and e.has("turn_right")  # a right turn from the right joins the ego's way
-            if rels & {"left_of", "right_of"} and Relation.ONCOMING not in rels \
+            if rels & {Relation.LEFT_OF, Relation.RIGHT_OF} and Relation.ONCOMING not in rels \
                     and not any(e.has(a) for a in lane_moves) and not joins \
                     and (e.attrs.get("side_road") or any(e.has(a) for a in ("go_straight", "turn_left",
                                                                               "turn_right", "collide"))

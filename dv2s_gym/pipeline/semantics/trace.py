@@ -67,6 +67,7 @@ import numpy as np
 import shapely
 from shapely.affinity import scale
 
+from dv2s_gym.pipeline.semantics.parsed import Lane
 from scenario_bank.elements import Action, ActorKind, Elements, Road
 from scenario_bank.maps import MAPS_DIR
 
@@ -96,7 +97,7 @@ PATH_LOOKAHEAD_M = 12.0  # the ego's path is extended this far ...
 PATH_LOOKAHEAD_S = 1.5   # ... or this many seconds at its last speed, whichever is longer
 NEAR = 80.0               # m: actors never closer than this to the ego are background traffic
 KEEP_LANE_MIN_M = 20.0    # m travelled along its path before a vehicle counts as keeping its lane
-JUNCTION_ROADS = ("intersection", "t_junction", "three_way", "roundabout")
+JUNCTION_ROADS = (Road.INTERSECTION, Road.T_JUNCTION, Road.THREE_WAY, Road.ROUNDABOUT)
 VEHICLE_LENGTH, VEHICLE_WIDTH = 5.0, 2.0   # m, highway-env's vehicle box (collision faces)
 FRONTAL_GAP = math.radians(45)   # heading gap up to which a front/back contact is rear-end ...
 HEAD_ON_GAP = math.radians(135)  # ... and from which it is head-on
@@ -110,8 +111,9 @@ PULL_OUT_CRASH_LATERAL_M = 0.2  # ... and this far sideways before the collision
 LANE_WIDTH = 3.5          # m, every shipped map
 DRIFT_OUT_S = 1.5         # s driven with the centre outside the lane it was centred in, for ``drift`` ...
 DRIFT_SETTLE_M = 0.6      # ... without coming this close to another lane's centre (that is a lane change)
-_LEAVES_LANE = {"u_turn", "reverse", "swerve", "pull_out", "drift", "cut_in", "merge", "overtake", "lane_change_left", "lane_change_right",
-                "turn_left", "turn_right"}
+_LEAVES_LANE = {Action.U_TURN, Action.REVERSE, Action.SWERVE, Action.PULL_OUT, Action.DRIFT, Action.CUT_IN,
+                Action.MERGE, Action.OVERTAKE, Action.LANE_CHANGE_LEFT, Action.LANE_CHANGE_RIGHT, Action.TURN_LEFT,
+                Action.TURN_RIGHT}
 _MET_BY_EGO = (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BUS, ActorKind.MOTORCYCLE, ActorKind.BICYCLE, ActorKind.OBSTACLE)
 """The kinds whose moves relative to the ego are the ego's interactions (an obstacle's: only an overtake)."""
 
@@ -334,7 +336,7 @@ def elements_from_trace(trace) -> Elements:
             for other, other_kind in near.items():
                 if other != "ego" and other_kind in _MET_BY_EGO:
                     found = _interactions(tracks[other], ego, "ego", ego_changes, road, dt, view)
-                    own |= found if other_kind != ActorKind.OBSTACLE else found & {"overtake"}
+                    own |= found if other_kind != ActorKind.OBSTACLE else {a for a in found if a == Action.OVERTAKE}
         else:
             relations.update((kind, r, "ego") for r in _relations(ego, track))
             if _paths_cross(ego, track):
@@ -372,12 +374,12 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     if rises.size and rises.max() >= BRAKE_DROP:
         out.add("accelerate")
     for change in changes:
-        out.add("lane_change_left" if change.get("direction") == "left" else "lane_change_right")
+        out.add("lane_change_left" if change.get("direction") == Lane.LEFT else "lane_change_right")
     out |= _special_motions(track, changes)
     if Action.PULL_OUT not in out and crashed_at is not None and _crashed_pulling_out(track, crashed_at, dt):
         out.add("pull_out")
     turn = float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])
-    windows = _drift_windows(_until_crash(track, crashed_at, dt), dt, view) if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} else []
+    windows = _drift_windows(_until_crash(track, crashed_at, dt), dt, view) if abs(turn) < TURN_ANGLE and not out & {Action.U_TURN, Action.PULL_OUT} else []
     if windows:
         out.add("drift")
         lateral = np.array([abs(ego_frame(track[0], row)[1]) for row in track])

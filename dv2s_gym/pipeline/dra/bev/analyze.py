@@ -10,7 +10,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from scenario_bank.elements import Elements
+from scenario_bank.elements import Action, ActorKind, Elements, Relation, Road
 from dv2s_gym.pipeline.dra.bev.frames import (
     BEV_READ_OPTIONS, NotBirdsEyeError, _check_birds_eye, _frames_and_times, _hsv, _mask,
 )
@@ -263,14 +263,14 @@ def _story_actors(ctx: _Ctx, tracks: List[Track], ego_acts: set, ego_crashed: bo
     """The actors of the story (:func:`._actor`), with those the ego's situation makes part of it: cars alongside
     that keep the ego from steering around an obstacle in its lane, the ego's crash partner, and the car the ego
     overtakes (the ego's ``overtake`` is added to ``ego_acts``)."""
-    ego_turn = "turn_left" if "turn_left" in ego_acts else "turn_right" if "turn_right" in ego_acts else None
+    ego_turn = "turn_left" if Action.TURN_LEFT in ego_acts else "turn_right" if Action.TURN_RIGHT in ego_acts else None
     actors = []
     for trk in tracks:
         actor = _actor(ctx, trk, ego_turn)
         if actor is not None:
             actor["junction_side"] = ctx.junction
             actors.append(actor)
-    if any(a["kind"] == "obstacle" and "same_lane" in a["relations"] for a in actors):
+    if any(a["kind"] == ActorKind.OBSTACLE and Relation.SAME_LANE in a["relations"] for a in actors):
         _blocking_neighbours(actors, ctx.lane_w)
     if ego_crashed:
         # the ego's crash partner: the nearest crashed actor
@@ -293,7 +293,7 @@ def _blocking_neighbours(actors: List[Dict[str, Any]], lane_w: float) -> None:
     each such car (counted traffic, no lane change) becomes a key actor that keeps its lane beside the ego."""
     for a in actors:
         trk = a["track"]
-        if a["role"] != "traffic" or a["kind"] not in ("car", "truck"):
+        if a["role"] != "traffic" or a["kind"] not in (ActorKind.CAR, ActorKind.TRUCK):
             continue
         lon, lat = trk.info["lon"], trk.info["lat"]
         beside = (np.abs(lon) < 8.0) & (np.abs(lat) > 0.5 * lane_w) & (np.abs(lat) < 1.5 * lane_w)
@@ -383,7 +383,7 @@ def analyze_bev(clip, question: Optional[str] = None) -> BevAnalysis:
             _orient_by_motion(trk, ctx)
     road, road_ev = _road_type(out, scale, heading, _oncoming_seen(tracks, heading), (w, h))
     ctx.road = road
-    ctx.junction = road in ("intersection", "t_junction", "three_way", "roundabout")
+    ctx.junction = road in (Road.INTERSECTION, Road.T_JUNCTION, Road.THREE_WAY, Road.ROUNDABOUT)
     ego_acts, ego_react, ego_notes = _ego_actions(ctx, ego_speed, crashed_frames >= 1)
     actors = _story_actors(ctx, tracks, ego_acts, crashed_frames >= 1)
     elements = _story_elements(road, ego_acts, actors)

@@ -9,6 +9,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from scenario_bank.elements import Action, ActorKind, Relation, Road
 from dv2s_gym.pipeline.dra.bev.detection import _Frame
 from dv2s_gym.pipeline.dra.bev.tracking import (
     Track, _facing_votes, _local_slope, _smooth, _unwrap_axis, _wrap,
@@ -285,7 +286,7 @@ def _speed_actions(ctx: _Ctx, s: _ActorState) -> None:
             s.notes["closing_speed"] = round(closing, 1)
             if closing >= 5.0 and settle < 0.8 and float(lon[-1]) < 15.0:
                 acts.add("stop")
-    if accel and not brake and "stop" not in acts and not ctx.junction and not stopped_from_start:
+    if accel and not brake and Action.STOP not in acts and not ctx.junction and not stopped_from_start:
         acts.add("accelerate")
 
 
@@ -320,7 +321,7 @@ def _lane_changes_and_cut_in(ctx: _Ctx, s: _ActorState) -> Tuple[List[Tuple[int,
         if s.ego_lanes[k] is not None and b == s.ego_lanes[k] and any(-2.0 < lon[m] < 40.0 for m in later):
             cut_in = True
             s.notes["cut_in_t"] = round(float(t[k]), 2)
-        if ctx.road == "merge" and b < a and (s.start_lane is None or a == max(l for l in lanes if l is not None)):
+        if ctx.road == Road.MERGE and b < a and (s.start_lane is None or a == max(l for l in lanes if l is not None)):
             s.acts.add("merge")
     near_lanes = bool(np.all(np.abs(lat[s.valid]) < 1.6 * lane_w)) if s.valid.any() else False
     if not changes and near_lanes:
@@ -342,7 +343,7 @@ def _lane_actions(ctx: _Ctx, s: _ActorState) -> None:
         return
     lon, lanes, in_lane, k0 = s.lon, s.lanes, s.in_lane, s.k0
     changes, cut_in = _lane_changes_and_cut_in(ctx, s)
-    if ctx.road == "merge" and "merge" not in s.acts and s.start_lane is None and any(
+    if ctx.road == Road.MERGE and Action.MERGE not in s.acts and s.start_lane is None and any(
             l is not None for l in lanes[k0 + 2:]) and s.lat[k0] < -1.0 * s.lane_w:
         s.acts.add("merge")
         if any(in_lane[k] and lon[k] > -2 for k in range(k0, s.n)):
@@ -375,7 +376,7 @@ def _drift_and_crossing_actions(ctx: _Ctx, s: _ActorState) -> None:
         inside = (np.abs(lat) < 0.5 * lane_w) & (lon > 0) & (lon < 40) & s.valid
         if int(inside.sum()) >= 2:
             s.acts.add("drift")
-    if s.kind == "pedestrian":
+    if s.kind == ActorKind.PEDESTRIAN:
         ok = np.isfinite(lat)
         lat_s = _smooth(s.t[ok], lat[ok], 0.5) if ok.sum() else lat
         travel = float(np.nanmax(lat_s) - np.nanmin(lat_s)) if len(lat_s) else 0.0
@@ -392,11 +393,11 @@ def _junction_actions(ctx: _Ctx, s: _ActorState) -> None:
     """At a junction: a moving vehicle that does not turn goes straight (on a roundabout, one circling the ring
     across the ego's course ahead of it does not); yielding and slowing for turns are no braking."""
     lon, lat, acts = s.lon, s.lat, s.acts
-    if ctx.junction and s.vehicle and s.moving and not ({"turn_left", "turn_right"} & acts):
+    if ctx.junction and s.vehicle and s.moving and not ({Action.TURN_LEFT, Action.TURN_RIGHT} & acts):
         acts.add("go_straight")
     both = np.isfinite(lon) & np.isfinite(lat)
     k_cross = int(np.argmin(np.where(both, np.abs(lat), np.inf))) if both.any() else -1
-    if ctx.road == "roundabout" and s.vehicle and s.crossing and "go_straight" in acts and k_cross >= 0 \
+    if ctx.road == Road.ROUNDABOUT and s.vehicle and s.crossing and Action.GO_STRAIGHT in acts and k_cross >= 0 \
             and float(lon[k_cross]) > 0:
         # a car circling the ring that passes across the ego's course ahead of it (the ego enters behind
         # it): it does not "go straight on", it drives round ahead of the ego
@@ -414,8 +415,8 @@ def _start_relations(ctx: _Ctx, s: _ActorState, ego_turn: Optional[str]) -> None
     side = ("left_of" if la0 > 0 else "right_of") if abs(la0) > 0.5 * s.lane_w else None
     if s.notes.get("side_before_change"):
         side = s.notes["side_before_change"]
-    if s.kind == "pedestrian":
-        if "cross" in acts:
+    if s.kind == ActorKind.PEDESTRIAN:
+        if Action.CROSS in acts:
             rels.update({"ahead_of", "crossing_path"})
         else:
             rels.add("ahead_of" if lo0 > 0 else "behind")
@@ -423,13 +424,13 @@ def _start_relations(ctx: _Ctx, s: _ActorState, ego_turn: Optional[str]) -> None
                 rels.add(side)
     elif s.vehicle and s.oncoming:
         rels.add("oncoming")
-        if ego_turn == "turn_left" or (ego_turn is None and "turn_left" in acts):
+        if ego_turn == Action.TURN_LEFT or (ego_turn is None and Action.TURN_LEFT in acts):
             rels.add("crossing_path")   # a left turn across the oncoming lane (the ego's or the other's)
-    elif "cut_in" in acts or "merge" in acts:
+    elif Action.CUT_IN in acts or Action.MERGE in acts:
         rels.add("ahead_of")
-        if s.start_in_lane and not ("merge" in acts):
+        if s.start_in_lane and not (Action.MERGE in acts):
             rels.add("same_lane")
-        elif "merge" in acts:
+        elif Action.MERGE in acts:
             rels.add("right_of" if la0 <= 0 else "left_of")
         elif side:
             rels.add(side)
@@ -441,7 +442,7 @@ def _start_relations(ctx: _Ctx, s: _ActorState, ego_turn: Optional[str]) -> None
     else:
         if side:
             rels.add(side)
-        if abs(lo0) > 10.0 and not ("overtake" in acts):
+        if abs(lo0) > 10.0 and not (Action.OVERTAKE in acts):
             rels.add("ahead_of" if lo0 > 0 else "behind")
 
 
@@ -449,7 +450,7 @@ def _junction_relations(s: _ActorState, side: Optional[str], lo0: float) -> None
     """A vehicle's relations at a junction: turned into the ego's lane ahead, circling the ring ahead, across the
     ego's course (from one side of its heading line to the other), in its lane, or beside it."""
     acts, rels, lon, lat = s.acts, s.rels, s.lon, s.lat
-    turned_in = bool(({"turn_left", "turn_right"} & acts) and s.in_lane[-1] and lon[-1] > 0)
+    turned_in = bool(({Action.TURN_LEFT, Action.TURN_RIGHT} & acts) and s.in_lane[-1] and lon[-1] > 0)
     if turned_in:
         rels.add("ahead_of")
         if side:
@@ -460,7 +461,7 @@ def _junction_relations(s: _ActorState, side: Optional[str], lo0: float) -> None
         # across the ego's course: it passes from one side of the ego's heading line to the other, ahead
         ahead = lon > -2.0
         if ahead.any() and (np.nanmax(lat[ahead]) > 0.5 * s.lane_w and np.nanmin(lat[ahead]) < -0.5 * s.lane_w
-                            or "go_straight" in acts):
+                            or Action.GO_STRAIGHT in acts):
             rels.add("crossing_path")
         elif side:
             rels.add(side)
@@ -491,9 +492,9 @@ def _role(ctx: _Ctx, s: _ActorState) -> Tuple[Optional[str], bool]:
     nothing; a parked vehicle and a slower lead are noted."""
     dist, lon, speed = s.dist, s.lon, s.speed
     lead = int(np.sum(s.in_lane & (lon > 0) & (lon < 40.0) & s.valid)) >= 4 and not s.oncoming
-    notable = bool(s.acts & {"brake", "stop", "cut_in", "merge", "lane_change_left", "lane_change_right",
-                             "turn_left", "turn_right", "cross", "collide", "drift", "overtake"})
-    if not (s.acts - {"accelerate"}):
+    notable = bool(s.acts & {Action.BRAKE, Action.STOP, Action.CUT_IN, Action.MERGE, Action.LANE_CHANGE_LEFT, Action.LANE_CHANGE_RIGHT,
+                             Action.TURN_LEFT, Action.TURN_RIGHT, Action.CROSS, Action.COLLIDE, Action.DRIFT, Action.OVERTAKE})
+    if not (s.acts - {Action.ACCELERATE}):
         s.acts.discard("accelerate")  # speeding up alone is not part of the scene's story
     close_oncoming = s.oncoming and bool(np.any((np.abs(s.lat) < 1.7 * s.lane_w) & (np.abs(lon) < 35)))
     slower_lead = _is_slower_lead(ctx, s, lead)
@@ -501,9 +502,9 @@ def _role(ctx: _Ctx, s: _ActorState) -> Tuple[Optional[str], bool]:
     fully = any(not b.border for b in s.trk.blobs)
     if s.vehicle and not fully:
         role = "traffic" if seen >= 3 else None   # never entirely in view: counted, nothing more
-    elif s.kind == "pedestrian":
+    elif s.kind == ActorKind.PEDESTRIAN:
         role = "key" if dist.min() < 35 else None
-    elif s.kind == "obstacle":
+    elif s.kind == ActorKind.OBSTACLE:
         role = "key" if bool(np.any(s.in_lane & (lon > 0))) else ("traffic" if dist.min() < TRAFFIC_NEAR else None)
         s.acts.clear()
     elif close_oncoming or (notable and dist.min() < 40.0):
@@ -529,17 +530,17 @@ def _settle_story(ctx: _Ctx, s: _ActorState, role: str, lead: bool) -> None:
     car that only drives past keeps its lane; a merge is its own lane change, and a cut-in when it ends in the
     ego's lane (else the side it merges beside)."""
     if lead and s.vehicle and not s.oncoming and not s.crossing and not ctx.junction and \
-            not (s.acts & {"cut_in", "merge", "overtake", "turn_left", "turn_right"}):
+            not (s.acts & {Action.CUT_IN, Action.MERGE, Action.OVERTAKE, Action.TURN_LEFT, Action.TURN_RIGHT}):
         s.rels = {"ahead_of", "same_lane"}
     if role == "traffic":
         s.acts, s.rels = set(), set()
-    elif s.vehicle and s.oncoming and not ctx.junction and not (s.acts - {"accelerate"}):
+    elif s.vehicle and s.oncoming and not ctx.junction and not (s.acts - {Action.ACCELERATE}):
         s.acts = {"keep_lane"}   # an oncoming car that only drives past holds its own lane
-    if "merge" in s.acts:
+    if Action.MERGE in s.acts:
         s.acts -= {"lane_change_left", "lane_change_right"}   # merging is the lane change
-        if "ahead_of" in s.rels and bool(np.any(s.in_lane[s.k0:])):
+        if Relation.AHEAD_OF in s.rels and bool(np.any(s.in_lane[s.k0:])):
             s.acts.add("cut_in")   # merging into the ego's lane
-        elif "ahead_of" in s.rels:
+        elif Relation.AHEAD_OF in s.rels:
             # merging into the lane beside the ego's: the text says "into the lane next to it" (a merge
             # "ahead of" the ego reads back as a cut-in), so the relation kept is the side
             s.rels = {"right_of" if float(s.lat[s.k0]) <= 0 else "left_of"}
@@ -607,10 +608,10 @@ def _ego_actions(ctx: _Ctx, ego_speed: np.ndarray, crashed: bool) -> Tuple[set, 
 def ego_overtaken(ego_acts: set, actors: List[Dict[str, Any]]) -> Optional[Dict[str, Any]]:
     """The vehicle the ego passes after changing lanes (it drove ahead of the ego in its lane and ends
     behind it), or None."""
-    if not ego_acts & {"lane_change_left", "lane_change_right"}:
+    if not ego_acts & {Action.LANE_CHANGE_LEFT, Action.LANE_CHANGE_RIGHT}:
         return None
     for a in actors:
-        if a["kind"] not in ("car", "truck") or a["oncoming"] or not a.get("started_ahead_in_lane"):
+        if a["kind"] not in (ActorKind.CAR, ActorKind.TRUCK) or a["oncoming"] or not a.get("started_ahead_in_lane"):
             continue
         lon, valid = a["track"].info["lon"], a["track"].info["valid"]
         seen = np.nonzero(valid)[0]

@@ -7,28 +7,30 @@ import re
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
+from scenario_bank.elements import Action, ActorKind, Relation, Road
+
 __all__ = ["ROAD_PHRASES", "ROAD_SCENES"]
 
 
 ROAD_PHRASES = {
-    "highway": "a straight multi-lane highway",
-    "straight_road": "a two-way urban street",
-    "intersection": "a four-way urban intersection",
-    "t_junction": "an urban T-junction",
-    "three_way": "a three-way junction",
-    "roundabout": "a roundabout",
-    "merge": "a highway with an on-ramp",
+    Road.HIGHWAY: "a straight multi-lane highway",
+    Road.STRAIGHT_ROAD: "a two-way urban street",
+    Road.INTERSECTION: "a four-way urban intersection",
+    Road.T_JUNCTION: "an urban T-junction",
+    Road.THREE_WAY: "a three-way junction",
+    Road.ROUNDABOUT: "a roundabout",
+    Road.MERGE: "a highway with an on-ramp",
 }
 
 
 ROAD_SCENES = {
-    "highway": "on a highway",
-    "straight_road": "on a two-way urban street",
-    "intersection": "at a four-way urban intersection",
-    "t_junction": "at an urban T-junction",
-    "three_way": "at a three-way junction",
-    "roundabout": "at a roundabout",
-    "merge": "on a highway where an on-ramp joins",
+    Road.HIGHWAY: "on a highway",
+    Road.STRAIGHT_ROAD: "on a two-way urban street",
+    Road.INTERSECTION: "at a four-way urban intersection",
+    Road.T_JUNCTION: "at an urban T-junction",
+    Road.THREE_WAY: "at a three-way junction",
+    Road.ROUNDABOUT: "at a roundabout",
+    Road.MERGE: "on a highway where an on-ramp joins",
 }
 
 
@@ -40,7 +42,7 @@ _COUNT = {1: "a", 2: "two", 3: "three", 4: "four", 5: "five", 6: "six", 7: "seve
 def _noun(kind: str, count: int = 1) -> str:
     if count == 1:
         return kind
-    return {"pedestrian": "pedestrians", "obstacle": "obstacles", "truck": "trucks"}.get(kind, kind + "s")
+    return {ActorKind.PEDESTRIAN: "pedestrians", ActorKind.OBSTACLE: "obstacles", ActorKind.TRUCK: "trucks"}.get(kind, kind + "s")
 
 
 @dataclass
@@ -84,11 +86,11 @@ def _words(actor: Dict[str, Any], count: int, ref: str) -> _Words:
     plural = count > 1
     n = _COUNT.get(count, str(count))
     poss = "its" if ref == "it" else "the ego car's"
-    side = "left" if "left_of" in rels else "right" if "right_of" in rels else None
+    side = "left" if Relation.LEFT_OF in rels else "right" if Relation.RIGHT_OF in rels else None
     where = []
-    if "ahead_of" in rels:
+    if Relation.AHEAD_OF in rels:
         where.append(f"ahead of {ref}")
-    if "behind" in rels:
+    if Relation.BEHIND in rels:
         where.append(f"behind {ref}")
     if side:
         where.append(f"on {poss} {side}")
@@ -96,22 +98,22 @@ def _words(actor: Dict[str, Any], count: int, ref: str) -> _Words:
                    lane="its lane" if ref == "it" else "the ego's lane", plural=plural, n=n,
                    noun=_noun(kind, count), art=("an" if kind[0] in "aeiou" else "a") if not plural else n,
                    side=side, at=(" " + " ".join(where)) if where else "", extra=[])
-    if "brake" in acts:
+    if Action.BRAKE in acts:
         words.extra.append(words.verb("suddenly brakes", "suddenly brake"))
-    if "accelerate" in acts:
+    if Action.ACCELERATE in acts:
         words.extra.append(words.verb("accelerates", "accelerate"))
-    if "stop" in acts:
+    if Action.STOP in acts:
         words.extra.append(words.verb("stands still", "stand still"))
-    if "collide" in acts and not actor.get("hits_ego"):
+    if Action.COLLIDE in acts and not actor.get("hits_ego"):
         words.extra.append(words.verb("crashes", "crash"))
     return words
 
 
 def _obstacle_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """An obstacle lies in the ego's lane ahead, or where it is."""
-    if w.kind != "obstacle":
+    if w.kind != ActorKind.OBSTACLE:
         return None
-    if "same_lane" in w.rels:
+    if Relation.SAME_LANE in w.rels:
         return f"{w.art} {w.noun} {w.verb('lies', 'lie')} in the ego's lane ahead"
     return f"{w.art} {w.noun} {w.verb('lies', 'lie')}{w.at}"
 
@@ -119,30 +121,30 @@ def _obstacle_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
 def _pedestrian_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """A pedestrian crosses in front of the ego, waits (only when seen standing still: "waits" reads as a stop)
     or is where it is."""
-    if w.kind != "pedestrian":
+    if w.kind != ActorKind.PEDESTRIAN:
         return None
-    if "cross" in w.acts:
+    if Action.CROSS in w.acts:
         return f"{w.art} {w.noun} {w.verb('crosses', 'cross')} the road in front of {w.ref}"
-    return f"{w.art} {w.noun} {w.verb('waits', 'wait') if 'stop' in w.acts else w.verb('is', 'are')}{w.at}"
+    return f"{w.art} {w.noun} {w.verb('waits', 'wait') if Action.STOP in w.acts else w.verb('is', 'are')}{w.at}"
 
 
 def _merge_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """A vehicle from the on-ramp merges: into the lane beside the ego, in front of it, or behind it."""
-    if "merge" not in w.acts:
+    if Action.MERGE not in w.acts:
         return None
     head = f"{w.art} {w.noun} from the on-ramp {w.verb('merges', 'merge')}"
-    if w.side and "ahead_of" not in w.rels and "behind" not in w.rels:
+    if w.side and Relation.AHEAD_OF not in w.rels and Relation.BEHIND not in w.rels:
         return w.join(f"{head} into the lane next to {w.ref} on {w.poss} {w.side}")
-    if "ahead_of" in w.rels:
+    if Relation.AHEAD_OF in w.rels:
         return w.join(f"{head} into the lane in front of {w.ref}")
     return w.join(f"{head} onto the highway behind {w.ref}")
 
 
 def _cut_in_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """A cut-in just ahead of the ego: after overtaking it, or from the lane on a side."""
-    if "cut_in" not in w.acts:
+    if Action.CUT_IN not in w.acts:
         return None
-    if "overtake" in w.acts:
+    if Action.OVERTAKE in w.acts:
         return w.join(f"a faster {w.noun} {w.verb('overtakes', 'overtake')} the ego car and "
                       f"{w.verb('pulls', 'pull')} back into the ego's lane just ahead of {w.ref}")
     origin = f" in the lane to the {w.side} of the ego car" if w.side else ""
@@ -152,18 +154,18 @@ def _cut_in_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
 def _oncoming_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """Oncoming traffic: drifts across the centre line, goes straight, turns (across the ego's path), keeps to its
     lane, or passes by."""
-    if "oncoming" not in w.rels:
+    if Relation.ONCOMING not in w.rels:
         return None
     head = f"{'an' if not w.plural else w.n} oncoming {w.noun}"
-    if "drift" in w.acts:
+    if Action.DRIFT in w.acts:
         main = f"{w.verb('drifts', 'drift')} across the centre line into the ego's lane"
-    elif "go_straight" in w.acts:
+    elif Action.GO_STRAIGHT in w.acts:
         main = f"{w.verb('goes', 'go')} straight on"
-    elif "turn_left" in w.acts or "turn_right" in w.acts:
-        main = f"{w.verb('turns', 'turn')} {'left' if 'turn_left' in w.acts else 'right'}"
-        if "crossing_path" in w.rels:
+    elif Action.TURN_LEFT in w.acts or Action.TURN_RIGHT in w.acts:
+        main = f"{w.verb('turns', 'turn')} {'left' if Action.TURN_LEFT in w.acts else 'right'}"
+        if Relation.CROSSING_PATH in w.rels:
             main += f" and {w.verb('crosses', 'cross')} the ego's path"
-    elif "keep_lane" in w.acts:
+    elif Action.KEEP_LANE in w.acts:
         main = f"{w.verb('keeps', 'keep')} to its lane and {w.verb('passes', 'pass')} by on the other side"
     else:
         main = f"{w.verb('passes', 'pass')} by in the other lane"
@@ -172,30 +174,30 @@ def _oncoming_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
 
 def _crossing_path_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """Traffic across the ego's path: circling a roundabout ahead, else crossing and turning or going straight."""
-    if "crossing_path" not in w.rels:
+    if Relation.CROSSING_PATH not in w.rels:
         return None
-    turns = {"turn_left", "turn_right"} & w.acts
+    turns = {Action.TURN_LEFT, Action.TURN_RIGHT} & w.acts
     if actor.get("notes", {}).get("ring_ahead") and not turns:
         return w.join(f"{w.art} {w.noun} circling the roundabout {w.verb('crosses', 'cross')} the ego's path ahead "
                       f"of {w.ref}")
-    then = (f"{w.verb('turns', 'turn')} {'left' if 'turn_left' in w.acts else 'right'}"
+    then = (f"{w.verb('turns', 'turn')} {'left' if Action.TURN_LEFT in w.acts else 'right'}"
             if turns else f"{w.verb('goes', 'go')} straight on")
     return w.join(f"{w.art} {w.noun} {w.verb('crosses', 'cross')} the ego's path and {then}")
 
 
 def _turn_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """A turn, from the side road on a side of the ego, into the ego's lane when it ends up ahead."""
-    if "turn_left" not in w.acts and "turn_right" not in w.acts:
+    if Action.TURN_LEFT not in w.acts and Action.TURN_RIGHT not in w.acts:
         return None
-    d = "left" if "turn_left" in w.acts else "right"
+    d = "left" if Action.TURN_LEFT in w.acts else "right"
     origin = f" from the side road on {w.poss} {w.side}" if w.side else ""
-    into = f" into the ego's lane just ahead of {w.ref}" if "ahead_of" in w.rels else ""
+    into = f" into the ego's lane just ahead of {w.ref}" if Relation.AHEAD_OF in w.rels else ""
     return w.join(f"{w.art} {w.noun}{origin} {w.verb('turns', 'turn')} {d}{into}")
 
 
 def _alongside_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """A vehicle keeping its lane on a side of the ego drives alongside it."""
-    if "keep_lane" not in w.acts or not w.side:
+    if Action.KEEP_LANE not in w.acts or not w.side:
         return None
     return f"{w.art} {w.noun} {w.verb('drives', 'drive')} alongside the ego car in the lane to {w.poss} {w.side}"
 
@@ -210,7 +212,7 @@ def _parked_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
 
 def _slower_lead_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """A slower vehicle ahead in the ego's lane that only keeps its lane."""
-    if not (actor.get("notes", {}).get("slower_lead") and w.acts == {"keep_lane"} and "ahead_of" in w.rels):
+    if not (actor.get("notes", {}).get("slower_lead") and w.acts == {Action.KEEP_LANE} and Relation.AHEAD_OF in w.rels):
         return None
     return (f"{'a' if not w.plural else w.n} slower {w.noun} ahead of {w.ref} in the same lane "
             f"{w.verb('keeps', 'keep')} to {w.verb('its', 'their')} lane")
@@ -218,7 +220,7 @@ def _slower_lead_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
 
 def _standing_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
     """A vehicle that only stands still ahead in the ego's lane."""
-    if not ("same_lane" in w.rels and w.acts == {"stop"} and "ahead_of" in w.rels):
+    if not (Relation.SAME_LANE in w.rels and w.acts == {Action.STOP} and Relation.AHEAD_OF in w.rels):
         return None
     return f"{w.art} {w.noun} {w.verb('stands', 'stand')} still in {w.lane} ahead"
 
@@ -232,24 +234,24 @@ _CLAUSE_RULES = (_obstacle_clause, _pedestrian_clause, _merge_clause, _cut_in_cl
 def _moves_clause(actor: Dict[str, Any], w: _Words) -> str:
     """Any other vehicle: where it is (in the same lane ahead of or behind the ego, else as placed) and what it
     does: lane changes, overtaking, going straight, drifting, braking...; else it follows or drives on."""
-    at = f" {'ahead of' if 'ahead_of' in w.rels else 'behind'} {w.ref} in the same lane" if "same_lane" in w.rels \
+    at = f" {'ahead of' if Relation.AHEAD_OF in w.rels else 'behind'} {w.ref} in the same lane" if Relation.SAME_LANE in w.rels \
         else w.at
     main: List[str] = []
-    if "lane_change_left" in w.acts and "lane_change_right" in w.acts:
+    if Action.LANE_CHANGE_LEFT in w.acts and Action.LANE_CHANGE_RIGHT in w.acts:
         main.append(f"{w.verb('changes', 'change')} to the left lane and back to the right lane")
-    elif "lane_change_left" in w.acts:
+    elif Action.LANE_CHANGE_LEFT in w.acts:
         main.append(f"{w.verb('changes', 'change')} to the left lane")
-    elif "lane_change_right" in w.acts:
+    elif Action.LANE_CHANGE_RIGHT in w.acts:
         main.append(f"{w.verb('changes', 'change')} to the right lane")
-    if "overtake" in w.acts:
+    if Action.OVERTAKE in w.acts:
         main.append(f"{w.verb('overtakes', 'overtake')} the ego car")
-    if "go_straight" in w.acts:
+    if Action.GO_STRAIGHT in w.acts:
         main.append(f"{w.verb('goes', 'go')} straight on")
-    if "drift" in w.acts:
+    if Action.DRIFT in w.acts:
         main.append(f"{w.verb('drifts', 'drift')} across the centre line")
     main += w.extra
     if not main:
-        main.append(w.verb("follows", "follow") if "behind" in w.rels and "same_lane" in w.rels
+        main.append(w.verb("follows", "follow") if Relation.BEHIND in w.rels and Relation.SAME_LANE in w.rels
                     else w.verb("drives on", "drive on"))
     return f"{w.art} {w.noun}{at} " + " and ".join(main)
 
@@ -291,13 +293,13 @@ def _describe(road: Optional[str], ego_acts: set, actors: List[Dict[str, Any]], 
               n_lanes: int) -> str:
     """Paper-style description: the ego and the key event, the other actors, where it takes place."""
     place = ROAD_PHRASES.get(road or "", "a road")
-    if "turn_left" in ego_acts or "turn_right" in ego_acts:
-        first = f"The ego car turns {'left' if 'turn_left' in ego_acts else 'right'} at {place}"
-    elif "go_straight" in ego_acts:
+    if Action.TURN_LEFT in ego_acts or Action.TURN_RIGHT in ego_acts:
+        first = f"The ego car turns {'left' if Action.TURN_LEFT in ego_acts else 'right'} at {place}"
+    elif Action.GO_STRAIGHT in ego_acts:
         first = f"The ego car goes straight through {place}"
-    elif "lane_change_left" in ego_acts or "lane_change_right" in ego_acts:
-        first = f"The ego car changes to the {'left' if 'lane_change_left' in ego_acts else 'right'} lane of {place}"
-        if "overtake" in ego_acts:
+    elif Action.LANE_CHANGE_LEFT in ego_acts or Action.LANE_CHANGE_RIGHT in ego_acts:
+        first = f"The ego car changes to the {'left' if Action.LANE_CHANGE_LEFT in ego_acts else 'right'} lane of {place}"
+        if Action.OVERTAKE in ego_acts:
             first += " and overtakes"
     else:
         where = ""
@@ -310,8 +312,8 @@ def _describe(road: Optional[str], ego_acts: set, actors: List[Dict[str, Any]], 
                 where = "the middle lane of "
         first = f"The ego car drives in {where}{place}" if where else f"The ego car drives along {place}"
     key = [a for a in actors if a["role"] == "key"]
-    key.sort(key=lambda a: (-len(a["actions"] - {"go_straight", "keep_lane", "collide"}),
-                            "keep_lane" in a["actions"], a["min_dist"]))
+    key.sort(key=lambda a: (-len(a["actions"] - {Action.GO_STRAIGHT, Action.KEEP_LANE, Action.COLLIDE}),
+                            Action.KEEP_LANE in a["actions"], a["min_dist"]))
     groups = _groups(key)
     sentences = []
     if groups:
@@ -331,9 +333,9 @@ def _describe(road: Optional[str], ego_acts: set, actors: List[Dict[str, Any]], 
     partner = next((a for a in key if a.get("hits_ego")), None)
     if partner is not None:
         sentences.append(f"The {partner['kind']} collides with the ego car.")
-        if "collide" in ego_acts:
+        if Action.COLLIDE in ego_acts:
             sentences.append(f"The ego car collides with the {partner['kind']}.")
-    elif "collide" in ego_acts:
+    elif Action.COLLIDE in ego_acts:
         sentences.append("The ego car crashes.")
     if not key and not traffic:
         sentences.append("No other road user comes near the ego car.")
@@ -345,24 +347,24 @@ def _answer(question: str, road, ego_acts: set, ego_react: set, actors: List[Dic
     """A one-sentence answer to a question about the clip, when the analysis can give one."""
     q = question.lower()
     key = sorted([a for a in actors if a["role"] == "key"], key=lambda a: a["min_dist"])
-    cause = next((a for a in key if a["actions"] & {"brake", "stop", "cut_in", "merge", "cross", "drift"}
-                  or a["lead"] or a["kind"] in ("obstacle", "pedestrian")), None)
+    cause = next((a for a in key if a["actions"] & {Action.BRAKE, Action.STOP, Action.CUT_IN, Action.MERGE, Action.CROSS, Action.DRIFT}
+                  or a["lead"] or a["kind"] in (ActorKind.OBSTACLE, ActorKind.PEDESTRIAN)), None)
     if cause is None:   # yielding: to oncoming traffic when turning, to traffic crossing its path
-        cause = next((a for a in key if a["relations"] & {"oncoming", "crossing_path"}), None)
+        cause = next((a for a in key if a["relations"] & {Relation.ONCOMING, Relation.CROSSING_PATH}), None)
     if re.search(r"\b(why|cause|reason)\b", q) and re.search(r"(brak|slow|stop|decelerat|yield|wait|halt)", q):
-        if not ego_react & {"brake", "stop"}:
+        if not ego_react & {Action.BRAKE, Action.STOP}:
             return "The ego car does not visibly brake in this video."
         if cause is None:
             return "The ego car brakes, but no other road user in view explains it."
-        yielding = cause["kind"] in ("car", "truck") and not (
-            cause["actions"] & {"brake", "stop", "cut_in", "merge", "drift"} or cause["lead"])
-        if yielding and "oncoming" in cause["relations"] and ("turn_left" in ego_acts or "turn_right" in ego_acts):
+        yielding = cause["kind"] in (ActorKind.CAR, ActorKind.TRUCK) and not (
+            cause["actions"] & {Action.BRAKE, Action.STOP, Action.CUT_IN, Action.MERGE, Action.DRIFT} or cause["lead"])
+        if yielding and Relation.ONCOMING in cause["relations"] and (Action.TURN_LEFT in ego_acts or Action.TURN_RIGHT in ego_acts):
             return "The ego car brakes to yield to the oncoming traffic before it turns."
-        if yielding and "crossing_path" in cause["relations"]:
+        if yielding and Relation.CROSSING_PATH in cause["relations"]:
             return "The ego car brakes to yield to the traffic crossing its path."
         return f"The ego car brakes because {_definite(_clause(cause, 1, 'the ego car'))}."
     if re.search(r"(collid|crash|accident|\bhit)", q):
-        if "collide" in ego_acts:
+        if Action.COLLIDE in ego_acts:
             partner = next((a for a in key if a.get("hits_ego")), None)
             return f"Yes, the ego car collides with the {partner['kind']}." if partner else "Yes, the ego car crashes."
         return "No, nothing collides with the ego car in this video."
@@ -374,9 +376,9 @@ def _answer(question: str, road, ego_acts: set, ego_react: set, actors: List[Dic
         count = sum(1 for a in actors if a["kind"] in kinds)
         return f"There are {count} {word} around the ego car."
     if re.search(r"\bturn", q):
-        if "turn_left" in ego_acts:
+        if Action.TURN_LEFT in ego_acts:
             return "The ego car turns left."
-        if "turn_right" in ego_acts:
+        if Action.TURN_RIGHT in ego_acts:
             return "The ego car turns right."
         return "The ego car does not turn."
     if re.search(r"\b(road|where|location|place|kind of)\b", q):

@@ -87,7 +87,7 @@ def typed_collisions(s: Script) -> None:
     """The script means the collision type the text gives wherever it means the collision itself."""
     for actor in [s.frame.ego, *s.frame.actors]:
         kind = "ego" if actor.name == "ego" else actor.kind
-        typed = actor.details.get("collide", {}).get("type")
+        typed = actor.details.get(Action.COLLIDE, {}).get("type")
         if typed and (kind, Action.COLLIDE) in s.actions:
             s.actions.add((kind, typed))
 

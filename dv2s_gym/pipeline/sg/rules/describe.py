@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from typing import Any, Dict, List, Optional, Sequence
 
-from dv2s_gym.pipeline.semantics.parsed import Entity, ParsedDescription
+from dv2s_gym.pipeline.semantics.parsed import Entity, Lane, ParsedDescription
 from dv2s_gym.pipeline.semantics.text import parse_description
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.map_choice import choose_map
@@ -34,15 +34,15 @@ def _directed_actions(actor: ActorFrame, warnings: List[str]) -> None:
         detail = actor.details.get(action, {})
         if action == Action.LANE_CHANGE:
             side = detail.get("side") or detail.get("target")
-            if side not in ("left", "right"):
+            if side not in (Lane.LEFT, Lane.RIGHT):
                 side = "right" if Relation.LEFT_OF in actor.relations else "left"
             action = f"lane_change_{side}"
             actor.details.setdefault(action, dict(detail))
         elif action in COLLISION_HINTS:
             if actor.kind != ActorKind.EGO and not actor.relations:
                 actor.relations.extend(COLLISION_HINTS[action])
-            actor.details.setdefault("collide", dict(detail))
-            actor.details["collide"]["type"] = action
+            actor.details.setdefault(str(Action.COLLIDE), dict(detail))
+            actor.details[Action.COLLIDE]["type"] = action
             action = "collide"
         if action not in out:
             out.append(action)
@@ -58,7 +58,7 @@ def _actor_from(entity: Entity, name: str) -> ActorFrame:
         actor.details[action] = dict(detail)
         actor.sudden = actor.sudden or bool(detail.get("sudden"))
     actor.cross_dirs = list(entity.attrs.get("cross_dirs", []))
-    for d in actor.details.get("cross", {}).get("directions", []) or []:
+    for d in actor.details.get(Action.CROSS, {}).get("directions", []) or []:
         if d and d not in [c[0] for c in actor.cross_dirs]:
             actor.cross_dirs.append((d, 0))
     actor.state_stop = bool(entity.attrs.get("state_stop"))

@@ -14,7 +14,7 @@ from dv2s_gym.pipeline.sg.rules.junctions import compose_junction
 from dv2s_gym.pipeline.sg.rules.lanes import compose_lanes
 from dv2s_gym.pipeline.sg.rules.roads import JUNCTION_MAPS, MAP_ROADS
 from dv2s_gym.pipeline.sg.rules.script import Script
-from scenario_bank.elements import Elements
+from scenario_bank.elements import Elements, Road
 from dv2s_gym.pipeline.errors import EmptyDescriptionError
 
 __all__ = ["generate_rules"]
@@ -43,7 +43,7 @@ def generate_rules(description: str, seed: Optional[int] = None) -> SGResult:
     warnings.extend(unbuilt_warnings(parsed, s, warnings))
     warnings.extend(absent_warnings(parsed))
     road = MAP_ROADS.get(frame.map)
-    elements = Elements("t_junction" if frame.road == "three_way" else road, tuple(s.participants),
+    elements = Elements("t_junction" if frame.road == Road.THREE_WAY else road, tuple(s.participants),
                         tuple(sorted(s.actions)), tuple(sorted(s.relations)))
     return SGResult(script=script, frame=frame, warnings=list(dict.fromkeys(warnings)), elements=elements,
                     backend="rules", context_hash=blocks.context_hash())

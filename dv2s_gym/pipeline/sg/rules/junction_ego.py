@@ -49,4 +49,4 @@ def junction_ego_lines(s: Script, t: JunctionTiming, default_ego: Optional[str],
 
 def _shows_its_maneuver(ego, default_ego: Optional[str]) -> None:
     if default_ego is not None and not any(MANEUVER_TYPES.get(a) == default_ego for a in ego.actions):
-        ego.actions.append({v: k for k, v in MANEUVER_TYPES.items()}[default_ego])
+        ego.actions.append(str({v: k for k, v in MANEUVER_TYPES.items()}[default_ego]))

@@ -8,7 +8,7 @@ from typing import Any, Callable, Dict, Optional, Tuple
 
 from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
-from scenario_bank.elements import Relation
+from scenario_bank.elements import Action, Relation
 from scenario_bank.map_cache import load_network
 from scenario_bank.maps import resolve_map
 
@@ -16,7 +16,7 @@ __all__ = ["JUNCTION_ACTIONS", "MANEUVER_TYPES", "Maneuvers", "role_condition", 
 
 JUNCTION_ACTIONS = {"brake", "stop", "accelerate", "turn_left", "turn_right", "go_straight", "cross", "collide",
                     "keep_lane", "cut_in", "merge"}
-MANEUVER_TYPES = {"turn_left": "LEFT_TURN", "turn_right": "RIGHT_TURN", "go_straight": "STRAIGHT"}
+MANEUVER_TYPES = {Action.TURN_LEFT: "LEFT_TURN", Action.TURN_RIGHT: "RIGHT_TURN", Action.GO_STRAIGHT: "STRAIGHT"}
 
 
 class Maneuvers:

@@ -42,7 +42,7 @@ def spawn_junction_vehicle(s: Script, spec: RoleSpec, t: JunctionTiming, ring: b
                     f"    with behavior {behavior}"]
     acts = list(actor.actions)
     if mtype and not any(MANEUVER_TYPES.get(a) == mtype for a in acts):
-        acts.append({v: k for k, v in MANEUVER_TYPES.items()}[mtype])
+        acts.append(str({v: k for k, v in MANEUVER_TYPES.items()}[mtype]))
     if role == JunctionRole.INTO_PATH and actor.has("merge") and Relation.AHEAD_OF not in rels:
         rels.append("ahead_of")  # it joins the ego's road in front of the ego
     s.show(actor.kind, acts, list(dict.fromkeys(rels)), actor.count)

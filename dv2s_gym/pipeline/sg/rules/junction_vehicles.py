@@ -9,6 +9,7 @@ from dv2s_gym.pipeline.sg.rules.frame import CLASS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.junction_roles import MANEUVER_TYPES
 from dv2s_gym.pipeline.sg.rules.roads import RING_ENTRY, RING_QUARTER
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
+from scenario_bank.elements import Action
 
 __all__ = ["conflict_actor", "spawn_circulating", "junction_longitudinal"]
 
@@ -16,7 +17,7 @@ __all__ = ["conflict_actor", "spawn_circulating", "junction_longitudinal"]
 def conflict_actor(ego: ActorFrame, candidates: Sequence[ActorFrame]) -> Optional[ActorFrame]:
     """The vehicle the ego's stop waits for: the one its stop's trigger names (by kind), else the first
     vehicle crossing or meeting it at the junction."""
-    trigger = ego.details.get("stop", {}).get("trigger") or {}
+    trigger = ego.details.get(Action.STOP, {}).get("trigger") or {}
     other = trigger.get("with") if isinstance(trigger, dict) else None
     kind = getattr(other, "kind", None)
     return next((a for a in candidates if a.kind == kind), candidates[0] if candidates else None)
@@ -55,7 +56,7 @@ def spawn_circulating(s: Script, actor: ActorFrame, mtype: Optional[str], ego_sp
                     f"    with behavior {behavior}"]
     acts = list(actor.actions)
     if mtype and not any(MANEUVER_TYPES.get(a) == mtype for a in acts):
-        acts.append({v: k for k, v in MANEUVER_TYPES.items()}[mtype])
+        acts.append(str({v: k for k, v in MANEUVER_TYPES.items()}[mtype]))
     s.show(actor.kind, acts, list(dict.fromkeys(actor.relations + (["ahead_of"] if cuts_in else []))), actor.count)
 
 

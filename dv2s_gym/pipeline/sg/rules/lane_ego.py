@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from typing import Tuple
 
+from dv2s_gym.pipeline.semantics.parsed import Lane
 from dv2s_gym.pipeline.sg.rules.frame import KIND_SPEEDS, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.manoeuvres import drift, swerve, u_turn
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
-from scenario_bank.elements import ActorKind
+from scenario_bank.elements import Action, ActorKind
 
 __all__ = ["ego_lane_behavior"]
 
@@ -24,7 +25,7 @@ def ego_lane_behavior(s: Script, ego: ActorFrame, speed: str, reckless: bool, tw
             target = next((a for a in frame.actors if a.role == Role.OBSTACLE and a.side == 0 and a.count == 1), None)
         if target is not None:
             s.use("OvertakeAndReturn")
-            side = -1 if ego.details.get("overtake", {}).get("side") == "right" and not two_way else 1
+            side = -1 if ego.details.get(Action.OVERTAKE, {}).get("side") == Lane.RIGHT and not two_way else 1
             return (f"OvertakeAndReturn({target.name}, {side}, {speed}, Range(20, 26), Range(8, 12), "
                     f"Range(2.0, 2.8), {speed})"), False
         s.warnings.append("the ego overtakes, but nothing to overtake was described: the overtake is not placed")
@@ -60,11 +61,11 @@ def ego_lane_behavior(s: Script, ego: ActorFrame, speed: str, reckless: bool, tw
         return swerve(s, speed, ego), True
     if ego.has("drift"):
         oncoming = any(a.role == Role.ONCOMING for a in frame.actors)
-        if two_way and oncoming and ego.details.get("drift", {}).get("side") != "right":
+        if two_way and oncoming and ego.details.get(Action.DRIFT, {}).get("side") != Lane.RIGHT:
             # across the centre line into the oncoming vehicle's path
             s.use("DriftAndReturn")
             return (f"DriftAndReturn({speed}, 1000, Range(2.0, 2.8), Range(1.5, 2.5), -1, Range(1.2, 2.0))", True)
-        side = ego.details.get("drift", {}).get("side") or ("left" if oncoming else "right")
+        side = ego.details.get(Action.DRIFT, {}).get("side") or ("left" if oncoming else "right")
         return drift(s, speed, side, hold=None), True
     if ego.has("brake") or ego.has("stop") and not _something_stops_ego(frame):
         s.use("CautiousBrakeLater" if not reckless else "BrakeLater")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Dict, List, Tuple
 
+from dv2s_gym.pipeline.semantics.parsed import Lane
 from dv2s_gym.pipeline.sg.rules.lane_roles import LaneRoad
 from dv2s_gym.pipeline.sg.rules.roads import PARKING_STREET, STREET_LANES
 from dv2s_gym.pipeline.sg.rules.roles import Role
@@ -108,12 +109,12 @@ def _at_kerb_conditions(s: Script, road: LaneRoad, conds: List[str], max_left: i
             s.warnings.append("lanes to the right of the ego cannot be placed next to a vehicle parked at "
                               "the kerb: they are not placed")
             max_right = 0
-    if ego.lane == "left" and max_left == 0:
+    if ego.lane == Lane.LEFT and max_left == 0:
         conds.append("t[1] is None")
-    elif ego.lane == "right" and max_right == 0:
+    elif ego.lane == Lane.RIGHT and max_right == 0:
         # next to an on-ramp the acceleration lane is the right neighbour of the rightmost main lane
         conds.append("t[0] is mainLanes[0]" if road.onramp else "t[3] is None")
-    elif ego.lane == "middle":
+    elif ego.lane == Lane.MIDDLE:
         conds += ["t[1] is not None", "t[3] is not None"] if "t[1] is not None" not in conds or \
             "t[3] is not None" not in conds else []
     return max_right

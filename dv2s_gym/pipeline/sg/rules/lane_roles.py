@@ -12,7 +12,7 @@ from dv2s_gym.pipeline.sg.rules.frame import VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, PARKING_STREET, SHOULDER_HIGHWAY, STREET_MAPS
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
-from scenario_bank.elements import CAN_DO, ActorKind, Relation
+from scenario_bank.elements import CAN_DO, Action, ActorKind, Relation
 
 __all__ = ["LANE_ACTIONS", "LaneRoad", "assign_lane_roles", "lanes_needed"]
 
@@ -50,11 +50,11 @@ _ON_SHOULDER = re.compile(r"\b(?:on|onto|in|into|along) (?:the |its |their )?(?:
 def standing_on_the_shoulder(frame: ScenarioFrame) -> Optional[ActorFrame]:
     """On :data:`SHOULDER_HIGHWAY`, the one vehicle that stands still (stopped, parked, broken down: no action but
     stopping) when the description puts a vehicle on the (hard) shoulder or in the breakdown lane; else None."""
-    if frame.map != SHOULDER_HIGHWAY or frame.ego.lane not in (None, "right") or \
+    if frame.map != SHOULDER_HIGHWAY or frame.ego.lane not in (None, Lane.RIGHT) or \
             not _ON_SHOULDER.search(frame.description.lower()):
         return None
-    still = [a for a in frame.actors if a.kind in VEHICLES and not (set(a.actions) - {"stop", "keep_lane"})
-             and not ({"left_of", "oncoming", "behind"} & set(a.relations))]
+    still = [a for a in frame.actors if a.kind in VEHICLES and not (set(a.actions) - {Action.STOP, Action.KEEP_LANE})
+             and not ({Relation.LEFT_OF, Relation.ONCOMING, Relation.BEHIND} & set(a.relations))]
     return still[0] if len(still) == 1 else None
 
 
@@ -115,8 +115,8 @@ def _obstacle_role(q: _Asked) -> Role:
 def _slow_lead(q: _Asked) -> bool:
     """The ego overtakes: the first actor ahead in its lane (no other said to be placed) is the one it passes."""
     frame = q.s.frame
-    return frame.ego.has("overtake") and not (q.rels & {"left_of", "right_of", "behind"}) and not any(
-        a.role == Role.SLOW_LEAD for a in frame.actors)
+    return frame.ego.has("overtake") and not (q.rels & {Relation.LEFT_OF, Relation.RIGHT_OF, Relation.BEHIND}) \
+        and not any(a.role == Role.SLOW_LEAD for a in frame.actors)
 
 
 def _beside(q: _Asked) -> bool:
@@ -124,9 +124,9 @@ def _beside(q: _Asked) -> bool:
     lane", the ego's lane not said: beside the ego on that side)."""
     actor, ego, two_way, rels = q.actor, q.s.frame.ego, q.road.two_way, q.rels
     return Relation.LEFT_OF in rels or Relation.RIGHT_OF in rels or actor.lane == Lane.ADJACENT and not two_way or \
-        actor.lane in ("left", "right", "middle") and \
-        ego.lane in ("left", "right", "middle") and actor.lane != ego.lane or \
-        actor.lane in ("left", "right") and ego.lane is None and not two_way and Relation.SAME_LANE not in rels
+        actor.lane in (Lane.LEFT, Lane.RIGHT, Lane.MIDDLE) and \
+        ego.lane in (Lane.LEFT, Lane.RIGHT, Lane.MIDDLE) and actor.lane != ego.lane or \
+        actor.lane in (Lane.LEFT, Lane.RIGHT) and ego.lane is None and not two_way and Relation.SAME_LANE not in rels
 
 
 def _rams_from_behind(q: _Asked) -> bool:
@@ -144,7 +144,7 @@ _ROLE_RULES: Tuple[Tuple[Callable[[_Asked], bool], Union[Role, Callable[[_Asked]
     (lambda q: q.actor.has("merge") and q.road.onramp, Role.RAMP),
     (lambda q: q.actor.has("drift") or Relation.ONCOMING in q.rels,
      lambda q: _drifting_or_oncoming_role(q.s, q.actor, q.road, set(q.rels))),
-    (lambda q: q.actor.has("overtake") and not q.actor.details.get("overtake", {}).get("around"), Role.OVERTAKER),
+    (lambda q: q.actor.has("overtake") and not q.actor.details.get(Action.OVERTAKE, {}).get("around"), Role.OVERTAKER),
     (lambda q: q.actor.has("cut_in") or (q.actor.has("merge") and not q.road.onramp), Role.CUTTER),
     (_slow_lead, Role.SLOW_LEAD),
     (_beside, Role.ADJACENT),
@@ -172,7 +172,7 @@ def _drifting_or_oncoming_role(s: Script, actor: ActorFrame, road: LaneRoad, rel
                           "placed in the next lane instead")
         actor.relations = [r for r in actor.relations if r != Relation.ONCOMING]
     ego = s.frame.ego
-    right = Relation.RIGHT_OF in rels or actor.lane == "right" and ego.lane in (None, "middle", "left")
+    right = Relation.RIGHT_OF in rels or actor.lane == Lane.RIGHT and ego.lane in (None, Lane.MIDDLE, Lane.LEFT)
     actor.side = -1 if right and Relation.LEFT_OF not in rels else 1
     return Role.ADJACENT
 
@@ -188,14 +188,15 @@ def _adjust_role(s: Script, actor: ActorFrame, road: LaneRoad, standing: Optiona
     if actor is standing:
         actor.role = Role.SHOULDER  # stopped on the hard shoulder right of the rightmost lane
     if frame.map == PARKING_STREET and actor.parked and actor.role == Role.LEAD and actor.kind in VEHICLES and \
-            not (set(actor.actions) - {"stop", "keep_lane"}) and not ({"oncoming", "left_of"} & rels):
+            not (set(actor.actions) - {Action.STOP, Action.KEEP_LANE}) \
+            and not ({Relation.ONCOMING, Relation.LEFT_OF} & rels):
         # a parked car (or a row of them) on the street with parking lanes: at the ego's kerb, not in its lane
         actor.role = Role.FAR_SIDE
         actor.relations = [r for r in actor.relations if r != Relation.SAME_LANE] + ["right_of"]
     if road.on_shoulder and actor.role in (Role.LEAD, Role.FOLLOWER) and actor.kind in VEHICLES and \
             Relation.LEFT_OF not in actor.relations:
         actor.relations.append("left_of")  # in the lane left of the ego parked on the shoulder
-    if two_way and actor.role == Role.ADJACENT and not (set(actor.actions) - {"stop", "keep_lane"}):
+    if two_way and actor.role == Role.ADJACENT and not (set(actor.actions) - {Action.STOP, Action.KEEP_LANE}):
         actor.role = Role.FAR_SIDE  # parked or standing at the far kerb, in the other lane
     if two_way and actor.role in (Role.ADJACENT, Role.CUTTER):
         s.warnings.append(f"the {actor.kind} {actor.role} role needs a second lane in the ego's direction, "
@@ -220,7 +221,7 @@ def lanes_needed(s: Script, road: LaneRoad) -> Dict[int, bool]:
         need[1] = True
     if (ego.has("pull_out") or ego.has("reverse")) and not road.two_way and not road.onramp and not road.on_shoulder:
         need[1] = True  # parked in the rightmost lane (the shoulder), it pulls out into the lane left of it
-    around = [a for a in frame.actors if a.has("overtake") and a.details.get("overtake", {}).get("around")]
+    around = [a for a in frame.actors if a.has("overtake") and a.details.get(Action.OVERTAKE, {}).get("around")]
     if around and not road.two_way:
         need[1] = True
     return need
@@ -238,7 +239,7 @@ def _set_side(s: Script, actor: ActorFrame, road: LaneRoad) -> None:
             actor.side = order[actor.lane] - order[ego.lane]
             if road.multilane:  # a two-lane carriageway: its left and right lanes are neighbours
                 actor.side = max(-1, min(1, actor.side))
-        elif actor.lane in ("left", "right") and ego.lane is None:
+        elif actor.lane in (Lane.LEFT, Lane.RIGHT) and ego.lane is None:
             actor.side = order[actor.lane]
         elif Relation.LEFT_OF in rels:
             actor.side = 1
@@ -249,26 +250,26 @@ def _set_side(s: Script, actor: ActorFrame, road: LaneRoad) -> None:
     if actor.role == Role.CUTTER:
         _set_cutter_side(s, actor, rels)
     if actor.role in (Role.OVERTAKER,):
-        side = actor.details.get("overtake", {}).get("side") or "left"
-        actor.side = 1 if side == "left" else -1
+        side = actor.details.get(Action.OVERTAKE, {}).get("side") or "left"
+        actor.side = 1 if side == Lane.LEFT else -1
 
 
 def _set_cutter_side(s: Script, actor: ActorFrame, rels: set) -> None:
     """The side a cutter comes from: the one the text gives, else away from its lane change, else its lane's,
     else the side it is said to be on, else right for a truck and either for the rest."""
     ego = s.frame.ego
-    side = actor.details.get("cut_in", {}).get("side")
+    side = actor.details.get(Action.CUT_IN, {}).get("side")
     if side is None and actor.has("lane_change_left"):
         side = "right"
     if side is None and actor.has("lane_change_right"):
         side = "left"
-    if side is None and actor.lane in ("left", "right") and ego.lane in (None, "middle") and \
-            not (rels & {"left_of", "right_of"}):
+    if side is None and actor.lane in (Lane.LEFT, Lane.RIGHT) and ego.lane in (None, Lane.MIDDLE) and \
+            not (rels & {Relation.LEFT_OF, Relation.RIGHT_OF}):
         side = actor.lane  # "in the left lane", the ego's lane not said: it comes from that side
     if side is None:
         side = "left" if Relation.LEFT_OF in rels else "right" if Relation.RIGHT_OF in rels else \
             ("right" if actor.kind == ActorKind.TRUCK else s.rng.choice(["left", "right"]))
-    actor.side = 1 if side == "left" else -1
+    actor.side = 1 if side == Lane.LEFT else -1
     if Relation.LEFT_OF not in rels and Relation.RIGHT_OF not in rels:
         actor.relations.append(f"{side}_of")
 

@@ -10,7 +10,7 @@ from dv2s_gym.pipeline.sg.rules.manoeuvres import longitudinal_behavior
 from dv2s_gym.pipeline.sg.rules.placement import Placement
 from dv2s_gym.pipeline.sg.rules.roads import HIGHWAY_MAPS
 from dv2s_gym.pipeline.sg.rules.script import Script
-from scenario_bank.elements import Relation
+from scenario_bank.elements import Action, Relation
 
 __all__ = ["place_adjacent", "place_follower", "place_lead", "place_slow_lead"]
 
@@ -111,7 +111,7 @@ def _lead_gap(s: Script, actor: ActorFrame) -> str:
 
 def _goes_around(actor: ActorFrame) -> bool:
     """It overtakes around something (``overtake`` with ``around``)."""
-    return bool(actor.has("overtake") and actor.details.get("overtake", {}).get("around"))
+    return bool(actor.has("overtake") and actor.details.get(Action.OVERTAKE, {}).get("around"))
 
 
 def _parked_ego(s: Script, ctx: LaneContext) -> bool:

@@ -50,8 +50,8 @@ def _ego_actions(s: Script, road: LaneRoad) -> None:
         # merging into the next lane (a lane closed ahead, two lanes becoming one) without an on-ramp
         ego.actions.remove("merge")
         if not (ego.has("lane_change_left") or ego.has("lane_change_right")):
-            side = ego.details.get("merge", {}).get("side") or ego.details.get("merge", {}).get("target")
-            ego.actions.append("lane_change_right" if side == "right" else "lane_change_left")
+            side = ego.details.get(Action.MERGE, {}).get("side") or ego.details.get(Action.MERGE, {}).get("target")
+            ego.actions.append("lane_change_right" if side == Lane.RIGHT else "lane_change_left")
         s.warnings.append("the ego's merge without an on-ramp is built as a lane change into the next lane")
         s.merged_as_lane_change = True
     check_actions(ego, s, LANE_ACTIONS - {"cross", "merge"} | ({"merge"} if road.onramp else set()))

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from typing import Optional
 
+from dv2s_gym.pipeline.semantics.parsed import Lane
 from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import HIGHWAY_MAPS
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
-from scenario_bank.elements import ActorKind, Relation
+from scenario_bank.elements import Action, ActorKind, Relation
 
 __all__ = ["u_turn", "swerve", "drift", "longitudinal_behavior"]
 
@@ -27,12 +28,12 @@ def swerve(s: Script, speed: str, actor: Optional[ActorFrame] = None) -> str:
     The side is the one the text gives, else toward the ego for an actor beside it, else left. At highway
     speed the move is smaller and slower (1.1-1.3 m in 1.2-1.6 s) so that the car does not overshoot into the
     next lane. The ego swerves when something blocks its path (at the latest after 4 s)."""
-    detail = actor.details.get("swerve", {}) if actor is not None else {}
+    detail = actor.details.get(Action.SWERVE, {}) if actor is not None else {}
     side = detail.get("side") or detail.get("target")
-    if side not in ("left", "right") and actor is not None:
+    if side not in (Lane.LEFT, Lane.RIGHT) and actor is not None:
         side = "left" if Relation.RIGHT_OF in actor.relations else \
             "right" if Relation.LEFT_OF in actor.relations else None
-    sign = "-" if side == "right" else ""
+    sign = "-" if side == Lane.RIGHT else ""
     fast = s.frame.map in HIGHWAY_MAPS
     depth = f"{sign}Range(1.1, 1.3)" if fast else f"{sign}Range(1.2, 1.5)"
     duration = "Range(1.2, 1.6)" if fast else "Range(0.8, 1.2)"
@@ -46,7 +47,7 @@ def swerve(s: Script, speed: str, actor: Optional[ActorFrame] = None) -> str:
 def drift(s: Script, speed: str, side: str, hold: Optional[str]) -> str:
     """A slow drift out of the lane to ``side`` (about 2.1-2.6 m: the centre leaves the lane, the vehicle does not
     reach the next lane's centre), held ``hold`` seconds and steered back, or held for good (``hold`` None)."""
-    sign = "-" if side == "right" else ""
+    sign = "-" if side == Lane.RIGHT else ""
     s.use("DriftLater")
     return (f"DriftLater({speed}, Range(0.8, 1.6), {sign}Range(2.1, 2.6), Range(2.5, 3.5), "
             f"{hold if hold is not None else -1}, Range(1.8, 2.4))")
@@ -61,7 +62,7 @@ def longitudinal_behavior(s: Script, actor: ActorFrame, speed: str) -> str:
     if actor.has("drift"):
         # a vehicle beside the ego drifts toward the ego's lane; one in the ego's lane to the side the text says
         side = "left" if actor.side < 0 else "right" if actor.side > 0 else \
-            actor.details.get("drift", {}).get("side") or "right"
+            actor.details.get(Action.DRIFT, {}).get("side") or "right"
         return drift(s, speed, side, hold=None if actor.has("collide") else "Range(2.0, 3.0)")
     if actor.has("lane_change_left") or actor.has("lane_change_right"):
         side = 1 if actor.has("lane_change_left") else -1

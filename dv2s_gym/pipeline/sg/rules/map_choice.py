@@ -20,7 +20,7 @@ def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -
             continue
         if a.has("cut_in") or a.has("lane_change_left") or a.has("lane_change_right"):
             return True
-        static = not (set(a.actions) - {"stop", "keep_lane"}) or a.has("pull_out") or a.has("reverse")
+        static = not (set(a.actions) - {Action.STOP, Action.KEEP_LANE}) or a.has("pull_out") or a.has("reverse")
         if (Relation.LEFT_OF in a.relations or Relation.RIGHT_OF in a.relations) \
                 and Relation.ONCOMING not in a.relations and not a.has("drift") and not static:
             return True
@@ -30,7 +30,7 @@ def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -
 def _needs_three_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -> bool:
     """The ego in a middle lane, or vehicles of its direction on both sides of it: more lanes than the
     multi-lane town street has per direction."""
-    if ego.lane == "middle":
+    if ego.lane == Lane.MIDDLE:
         return True
     sides = set()
     for a in actors:
@@ -43,8 +43,8 @@ def _needs_three_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -> bool:
 
 def choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFrame], warnings: List[str]) -> str:
     all_actions = set(ego.actions) | {x for a in actors for x in a.actions}
-    turns = bool({"turn_left", "turn_right"} & set(ego.actions)) or any(
-        a.kind in VEHICLES and ({"turn_left", "turn_right"} & set(a.actions)) for a in actors)
+    turns = bool({Action.TURN_LEFT, Action.TURN_RIGHT} & set(ego.actions)) or any(
+        a.kind in VEHICLES and ({Action.TURN_LEFT, Action.TURN_RIGHT} & set(a.actions)) for a in actors)
     if road in ROAD_MAPS:
         chosen = ROAD_MAPS[road]
         if chosen == "urban_two_way" and _needs_same_direction_lanes(ego, actors):

@@ -32,7 +32,7 @@ def crossing_directions(actor: ActorFrame, rng: random.Random) -> List[str]:
     elif remaining > 0:
         # no direction said: from the side the text puts the pedestrian (or what it steps out from behind) on
         sides = list(actor.relations)
-        hidden = actor.details.get("cross", {}).get("from_behind")
+        hidden = actor.details.get(Action.CROSS, {}).get("from_behind")
         if hidden is not None:
             sides += [r for r, other in getattr(hidden, "relations", []) if getattr(other, "kind", "") == ActorKind.EGO]
         said = "right_to_left" if Relation.RIGHT_OF in sides else "left_to_right" if Relation.LEFT_OF in sides else None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import List, Tuple
 
+from scenario_bank.elements import Road
 from scenario_bank.maps.dimensions import LANE_WIDTH, ROUNDABOUT_ARM_START, ROUNDABOUT_RING_RADIUS
 
 __all__ = ["ROAD_MAPS", "MAP_ROADS", "JUNCTION_MAPS", "HIGHWAY_MAPS", "MULTILANE_STREET", "STREET_LANES", "RING_MAP",
@@ -12,13 +13,13 @@ __all__ = ["ROAD_MAPS", "MAP_ROADS", "JUNCTION_MAPS", "HIGHWAY_MAPS", "MULTILANE
            "RING_ENTRY", "RING_QUARTER", "at_kerb", "speed_ranges"]
 
 ROAD_MAPS = {
-    "highway": "highway_straight",
-    "merge": "highway_onramp",
-    "straight_road": "urban_two_way",
-    "intersection": "urban_crossroads",
-    "t_junction": "urban_t_junction",
-    "three_way": "urban_t_junction",
-    "roundabout": "urban_roundabout",
+    Road.HIGHWAY: "highway_straight",
+    Road.MERGE: "highway_onramp",
+    Road.STRAIGHT_ROAD: "urban_two_way",
+    Road.INTERSECTION: "urban_crossroads",
+    Road.T_JUNCTION: "urban_t_junction",
+    Road.THREE_WAY: "urban_t_junction",
+    Road.ROUNDABOUT: "urban_roundabout",
 }
 MAP_ROADS = {"highway_straight": "highway", "highway_onramp": "merge", "urban_two_way": "straight_road",
              "urban_parking": "straight_road",
