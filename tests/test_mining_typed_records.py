@@ -25,6 +25,7 @@ is its ``to_dict``.
 from __future__ import annotations
 
 import ast
+import copy
 import textwrap
 from pathlib import Path
 import json
@@ -836,6 +837,9 @@ _PRODUCT = ("dv2s_gym", "policies", "envs", "scenario_bank")
 """The product's packages."""
 _READERS = ("from_dict", "from_json", "from_checked", "of")
 """The readers whose job is to read a record's JSON object (or take the record as it is)."""
+_METRICS_REASON = ("the paper's metrics (ElementsLike) score the elements as read from a file too: a conversion report's "
+                   "detail.simulated and a label file's JSON object, as element_set reads them")
+"""Why the description metrics take an element record or its JSON object."""
 RECORD_OR_MAPPING_ALLOWED: Dict[str, str] = {
     "dv2s_gym/mining/conversion/failure_video.py:record_failure_video(record_or_trace)":
         "a user's entry point: it also takes a line of episodes.jsonl as read from the file, and names the fields "
@@ -843,8 +847,6 @@ RECORD_OR_MAPPING_ALLOWED: Dict[str, str] = {
     "dv2s_gym/mining/conversion/failure_video.py:write_failure_video(record_or_trace)":
         "a user's entry point: it also takes a line of episodes.jsonl as read from the file, and names the fields "
         "it lacks",
-    "dv2s_gym/mining/jsonl.py:JsonlAppender.append(record)":
-        "the exact replays' rows it writes are JSON objects (replay_failure_entry), beside records",
     "scenario_bank/entries.py:new_sidecar(provenance)":
         "takes the provenance a Scenic 2 upgrade returns as a JSON object (admission.upgrade_if_asked)",
     "scenario_bank/entries.py:new_provenance(provenance)":
@@ -855,6 +857,15 @@ RECORD_OR_MAPPING_ALLOWED: Dict[str, str] = {
     "scenario_bank/elements.py:element_set(data)":
         "reads the elements the description metrics are given (pipeline.metrics.ElementsLike): a record or its "
         "JSON object",
+    "dv2s_gym/pipeline/metrics.py:as_set(elements)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:scs(ground_truth)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:scs(description)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:hallucination_rate(ground_truth)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:hallucination_rate(description)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:semantic_preservation(description)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:semantic_preservation(scenario)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:e2e_sc(video_ground_truth)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:e2e_sc(simulated)": _METRICS_REASON,
     "dv2s_gym/loop/verdict.py:heldout_worse(tables)":
         "its PairedTable is the statistics' table (dv2s_gym.regress.stats), no record: the check goes by name",
 }
@@ -893,12 +904,76 @@ def _type_name(node: ast.expr) -> str:
     return text.strip("'\"").split("[")[0].split(".")[-1]
 
 
-def record_or_mapping_parameters(source: str, records: typing.AbstractSet[str]) -> List[str]:
+def type_aliases(source: str) -> Dict[str, ast.expr]:
+    """``{name: annotation}`` of the type aliases bound at the top of a module's ``source``: ``Name = <type>`` (a
+    subscripted type such as ``Sequence[Union[...]]``, or a ``|`` union) and ``Name: TypeAlias = <type>``."""
+    found: Dict[str, ast.expr] = {}
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            target, value = node.targets[0], node.value
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and node.value is not None \
+                and _type_name(node.annotation) == "TypeAlias":
+            target, value = node.target, node.value
+        else:
+            continue
+        if isinstance(value, ast.Subscript) or (isinstance(value, ast.BinOp) and isinstance(value.op, ast.BitOr)):
+            found[target.id] = value
+    return found
+
+
+def module_aliases(sources: typing.Mapping[str, str]) -> Dict[str, Dict[str, ast.expr]]:
+    """``{dotted module: {alias: annotation}}`` (:func:`type_aliases`) of ``{module path: source}``."""
+    return {path[:-3].replace("/", ".").removesuffix(".__init__"): type_aliases(source)
+            for path, source in sources.items()}
+
+
+def _aliases_in_scope(tree: ast.Module, own: Dict[str, ast.expr],
+                      imported: typing.Mapping[str, Dict[str, ast.expr]]) -> Dict[str, ast.expr]:
+    """The aliases a module's annotations can name: its own and those it imports (``from m import Alias [as A]``,
+    an alias of a module of ``imported``)."""
+    scope = dict(own)
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.module in imported:
+            for name in node.names:
+                if name.name in imported[node.module]:
+                    scope[name.asname or name.name] = imported[node.module][name.name]
+    return scope
+
+
+def _resolved(annotation: ast.expr, aliases: typing.Mapping[str, ast.expr], depth: int = 5) -> ast.expr:
+    """``annotation`` with each alias of ``aliases`` it names (``Name``, ``"Name"``, ``module.Name``) replaced by
+    what the alias stands for, aliases of aliases too (``depth`` levels)."""
+    if isinstance(annotation, ast.Constant) and isinstance(annotation.value, str):
+        try:
+            annotation = ast.parse(annotation.value, mode="eval").body
+        except SyntaxError:
+            return annotation
+
+    class Resolve(ast.NodeTransformer):
+        def visit_Name(self, node: ast.Name) -> ast.expr:
+            return aliases[node.id] if node.id in aliases else node
+
+        def visit_Attribute(self, node: ast.Attribute) -> ast.expr:
+            return aliases[node.attr] if node.attr in aliases else self.generic_visit(node)
+
+    for _ in range(depth):
+        resolved = Resolve().visit(copy.deepcopy(annotation))
+        if ast.dump(resolved) == ast.dump(annotation):
+            break
+        annotation = resolved
+    return annotation
+
+
+def record_or_mapping_parameters(source: str, records: typing.AbstractSet[str],
+                                 imported: typing.Mapping[str, Dict[str, ast.expr]] = None) -> List[str]:
     """``"<function>(<parameter>)"`` of the public functions and methods (``__init__`` of a public class too) in
     ``source`` that take a parameter annotated with a union of a record class of ``records`` and a JSON object
     (``Union[Record, Mapping[str, Any]]``, ``Record | dict``, anywhere in the annotation); the readers
-    (:data:`_READERS`) excepted."""
+    (:data:`_READERS`) excepted. A type alias the annotation names is read as what it stands for: the module's own
+    (``Records = Sequence[Union[Record, Mapping[str, Any]]]``) and one it imports from a module of ``imported``
+    (:func:`module_aliases`)."""
     tree, found = ast.parse(source), []
+    aliases = _aliases_in_scope(tree, type_aliases(source), imported or {})
     functions = [(node.name, node) for node in tree.body if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
     functions += [(f"{cls.name}.{item.name}", item) for cls in tree.body
                   if isinstance(cls, ast.ClassDef) and not cls.name.startswith("_")
@@ -909,7 +984,8 @@ def record_or_mapping_parameters(source: str, records: typing.AbstractSet[str]) 
             continue
         arguments = node.args.posonlyargs + node.args.args + node.args.kwonlyargs
         for argument in arguments:
-            unions = [_union_members(part) for part in ast.walk(argument.annotation)] if argument.annotation else []
+            annotation = _resolved(argument.annotation, aliases) if argument.annotation else None
+            unions = [_union_members(part) for part in ast.walk(annotation)] if annotation else []
             if any({_type_name(m) for m in members} & records
                    and {_type_name(m) for m in members} & {"Mapping", "Dict", "dict", "MutableMapping"}
                    for members in unions):
@@ -941,11 +1017,29 @@ def test_the_union_check_sees_a_record_or_its_json_object_taken():
             def __init__(self, data: Union[Outcome, Mapping[str, Any]]) -> None: ...
             @classmethod
             def from_dict(cls, data: Union[Outcome, Mapping[str, Any]]) -> "Reader": ...
+
+        Reports = Sequence[Union[Outcome, Mapping[str, Any]]]
+        Either: TypeAlias = Finer | dict
+        Again = Optional[Reports]
+        Records = Sequence[Outcome]
+
+        def aliased(reports: Reports, either: "Either", again: Again, records: Records) -> None: ...
     """)
     records = record_classes([planted])
     assert {"Outcome", "Finer"} <= records and "Reader" not in records
     assert record_or_mapping_parameters(planted, records) == [
-        "takes(report)", "optional(report)", "nested(episodes)", "piped(report)", "Reader.__init__(data)"]
+        "takes(report)", "optional(report)", "nested(episodes)", "piped(report)", "aliased(reports)",
+        "aliased(either)", "aliased(again)", "Reader.__init__(data)"]
+    # an alias imported from another module of the product, under its name or another
+    importing = textwrap.dedent("""
+        from dv2s_gym.loop.kinds import Reports, Records as Typed
+        from dv2s_gym.loop import kinds
+
+        def takes(reports: Reports, typed: Typed, dotted: kinds.Reports) -> None: ...
+    """)
+    imported = module_aliases({"dv2s_gym/loop/kinds.py": planted})
+    assert record_or_mapping_parameters(importing, records, imported) == ["takes(reports)", "takes(dotted)"]
+    assert record_or_mapping_parameters(importing, records) == []
 
 
 def test_no_public_product_function_takes_a_record_or_its_json_object():
@@ -956,8 +1050,9 @@ def test_no_public_product_function_takes_a_record_or_its_json_object():
     records = record_classes(sources.values())
     assert {"JsonRecord", "EpisodeRecord", "RegressReport", "LoopReportBody", "TrainRun", "FailureInteraction",
             "ReferenceOutcome", "Elements"} <= records
+    imported = module_aliases(sources)
     found = [f"{path}:{name}" for path, source in sources.items()
-             for name in record_or_mapping_parameters(source, records)]
+             for name in record_or_mapping_parameters(source, records, imported)]
     unlisted = [name for name in found if name not in RECORD_OR_MAPPING_ALLOWED]
     assert not unlisted, (f"{unlisted} take a record or its JSON object: take the record (the callers read a JSON "
                           "object with the record's from_dict), or list it in RECORD_OR_MAPPING_ALLOWED with the reason")
