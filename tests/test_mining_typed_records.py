@@ -1058,3 +1058,68 @@ def test_no_public_product_function_takes_a_record_or_its_json_object():
                           "object with the record's from_dict), or list it in RECORD_OR_MAPPING_ALLOWED with the reason")
     stale = sorted(set(RECORD_OR_MAPPING_ALLOWED) - set(found))
     assert not stale, f"{stale} no longer take a record or its JSON object: remove them from RECORD_OR_MAPPING_ALLOWED"
+
+
+_ROW_READERS = ("read_rows",)
+"""The readers of a JSON-lines file's rows as JSON objects (:func:`dv2s_gym.mining.jsonl.read_rows`)."""
+
+
+def _reads_rows(node: ast.AST, rows: typing.AbstractSet[str]) -> bool:
+    """Whether ``node`` holds rows as read: a call of a row reader (:data:`_ROW_READERS`) or a name bound to them."""
+    return any((isinstance(part, ast.Call) and ast.unparse(part.func).split(".")[-1] in _ROW_READERS)
+               or (isinstance(part, ast.Name) and part.id in rows) for part in ast.walk(node))
+
+
+def _bound_names(target: ast.expr) -> typing.Set[str]:
+    return {node.id for node in ast.walk(target) if isinstance(node, ast.Name)}
+
+
+def row_key_reads(source: str) -> List[str]:
+    """The string-key reads (``row["cluster"]``, ``row.get("status")``) of a row a JSON-lines reader returned
+    (:data:`_ROW_READERS`) in ``source``: of the call itself, of a name bound to its rows (``rows = read_rows(p)``),
+    and of a loop's or a comprehension's name over them (``for row in read_rows(p) + read_rows(q)``, ``{r["cluster"]
+    for r in read_rows(p)}``)."""
+    tree, found = ast.parse(source), {}
+    functions = (ast.FunctionDef, ast.AsyncFunctionDef)
+    top = ast.Module(body=[node for node in tree.body if not isinstance(node, functions + (ast.ClassDef,))],
+                     type_ignores=[])
+    for scope in [top] + [node for node in ast.walk(tree) if isinstance(node, functions)]:
+        rows: typing.Set[str] = set()
+        for _ in range(3):  # a name bound to rows, then a loop over that name...
+            for node in ast.walk(scope):
+                if isinstance(node, ast.Assign) and _reads_rows(node.value, rows):
+                    rows |= set().union(*(_bound_names(t) for t in node.targets))
+                elif isinstance(node, (ast.For, ast.AsyncFor, ast.comprehension)) and _reads_rows(node.iter, rows):
+                    rows |= _bound_names(node.target)
+        for node, target, _ in _key_reads(scope):
+            if _reads_rows(target, rows):
+                found[(node.lineno, node.col_offset)] = ast.unparse(node)
+    return [found[where] for where in sorted(found)]
+
+
+def test_the_row_read_check_sees_a_json_lines_row_read_by_key():
+    planted = textwrap.dedent("""
+        def run(path, settings):
+            rows = read_rows(path)
+            first = rows[0]["cluster"]
+            for row in read_rows(path / "conversions.jsonl") + read_rows(path / "replays.jsonl"):
+                status = row.get("status", "?")
+            kept = {r["replay_entry"] for r in jsonl.read_rows(path) if r.get("replay_entry")}
+            for number, line in enumerate(rows, 1):
+                cluster = line["cluster"]
+            records = [ConversionRecord.from_dict(row) for row in read_rows(path)]
+            return read_rows(path)[0]["index"], records[0].cluster, settings["cluster"], kept
+
+        def other(records):
+            return [(record.reproduction or {}).get("rate") for record in records]
+    """)
+    assert row_key_reads(planted) == ["rows[0]['cluster']", "row.get('status', '?')", "r['replay_entry']",
+                                      "r.get('replay_entry')", "line['cluster']", "read_rows(path)[0]['index']"]
+
+
+def test_the_product_reads_json_lines_rows_through_their_records():
+    """A row of a mining run's JSON-lines files (``episodes.jsonl``, ``conversions.jsonl``, ``replays.jsonl``,
+    ``heldout.jsonl``) is read into its record (``read_records``, ``read_conversions``, ``read_replays``, a record's
+    ``from_dict``), never by a literal key: a misspelt key would be a silent ``None``, a silent 0 in a count."""
+    found = {path: reads for path, reads in _product_reads(row_key_reads).items() if path != "dv2s_gym/mining/jsonl.py"}
+    assert not found, f"{found} read a JSON-lines row by key: read it into its record and read the record's fields"
