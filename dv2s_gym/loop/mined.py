@@ -12,6 +12,7 @@ from dv2s_gym.loop.record import MinedEntry, MiningSummary
 from dv2s_gym.loop.replays import REPLAYS_FILE, reference_passed, replay_entries
 from dv2s_gym.mining.cluster import cluster_failures, group
 from dv2s_gym.mining.conversion.record import read_conversions, read_replays
+from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.mining.miner import read_records
 
@@ -50,7 +51,11 @@ def mining_summary(mine_out: Path) -> MiningSummary:
     episodes, errors = len(records), sum(1 for record in records if record.error)
     failures = sum(1 for record in records if record.failure is not None)
     counted = sum(1 for record in records if record.failure is not None and record.avoidable is not False)  # as MineRun.avoidable
-    clusters = len(set(cluster_failures(records).values()))
+    clusters: Optional[int] = None
+    try:
+        clusters = len(set(cluster_failures(records).values()))
+    except MiningError:  # records the clusters cannot group (no family): the counts are informative, the loop goes on
+        pass
     statuses: Dict[str, int] = {}
     reasons: List[str] = []
     conversions = read_conversions(mine_out / "conversions.jsonl")
@@ -62,8 +67,10 @@ def mining_summary(mine_out: Path) -> MiningSummary:
     converted = sum(statuses.values())
     tried = {str(record.cluster) for record in conversions}
     # clusters no conversion tried whose every failing scene the reference driver failed too: never replayed
-    reference_failed = sum(1 for cluster, members in group(records).items()
-                           if cluster not in tried and not any(reference_passed(r) for r in members))
+    reference_failed = None
+    if clusters is not None:
+        reference_failed = sum(1 for cluster, members in group(records).items()
+                               if cluster not in tried and not any(reference_passed(r) for r in members))
     replayed: Dict[str, int] = {}
     for row in read_replays(mine_out / REPLAYS_FILE):
         status = str(row.status) if row.status is not None else "?"
@@ -72,8 +79,9 @@ def mining_summary(mine_out: Path) -> MiningSummary:
                          failures=failures, failures_against_policy=counted,
                          clusters=clusters, conversions=statuses, rejected_reasons=tuple(reasons[:40]),
                          rejected_reason_count=len(reasons),
-                         clusters_not_converted=max(0, clusters - converted),
-                         clusters_not_kept=max(0, clusters - converted - sum(replayed.values())),
+                         clusters_not_converted=None if clusters is None else max(0, clusters - converted),
+                         clusters_not_kept=None if clusters is None else max(0, clusters - converted
+                                                                             - sum(replayed.values())),
                          clusters_reference_failed=reference_failed)
 
 
