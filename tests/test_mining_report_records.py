@@ -178,3 +178,35 @@ def test_the_loop_report_lists_an_exact_replays_parameters_left_at_the_parents_d
     assert (f"  - exact replay replay_p_stall is the failing scene at its own seed only; at another seed these keep "
             f"the parent's draw: noise ({why})" in lines)
     assert not any("replay_q_stall" in line for line in lines)
+
+
+def test_the_loop_s_mining_counts_fail_loudly_on_a_line_that_is_no_episode_record(tmp_path):
+    """The loop reads a mining run's episodes.jsonl as the miner does: a line that is no episode record stops the
+    counts with the file, the episode and the bad field named (it is not skipped, which would count it as 0), and so
+    does a replays.jsonl row that is no replay row."""
+    import pytest
+
+    from dv2s_gym.loop.mined import mining_summary
+    from dv2s_gym.mining.errors import MiningError
+    from scenario_bank.records import RecordError
+
+    good = {"index": 0, "scenario": "s", "family": "s", "seed": 1, "error": "worker hung", "failure": None}
+    (tmp_path / "episodes.jsonl").write_text(json.dumps(good) + "\n")
+    summary = mining_summary(tmp_path)
+    assert (summary.episodes, summary.errors, summary.failures, summary.clusters) == (1, 1, 0, 0)
+    assert summary.errored.to_dict()["scenarios"] == {"s": 1} and summary.replays == {}
+    (tmp_path / "replays.jsonl").write_text(json.dumps({"cluster": "c", "index": 0, "status": "kept"}) + "\n"
+                                            + json.dumps({"cluster": "d", "index": 1, "status": "rejected"}) + "\n")
+    assert mining_summary(tmp_path).replays == {"kept": 1, "rejected": 1}
+    (tmp_path / "replays.jsonl").write_text(json.dumps({"cluster": "c", "index": 0, "status": "lost"}) + "\n")
+    with pytest.raises(RecordError, match=r"replays.jsonl, record 1: exact replay row field 'status' must be one of"):
+        mining_summary(tmp_path)
+    (tmp_path / "replays.jsonl").unlink()
+    (tmp_path / "episodes.jsonl").write_text(json.dumps({**good, "seed": "one"}) + "\n"
+                                             + json.dumps({**good, "index": 1}) + "\n")
+    with pytest.raises(MiningError, match=r"episodes.jsonl, episode 0: episode record field 'seed' must be an integer"):
+        mining_summary(tmp_path)
+    (tmp_path / "episodes.jsonl").write_text(json.dumps({**good, "index": "zero"}) + "\n"
+                                             + json.dumps({**good, "index": 1}) + "\n")
+    with pytest.raises(MiningError, match=r"line 1 is not an episode record \(no integer 'index'\)"):
+        mining_summary(tmp_path)

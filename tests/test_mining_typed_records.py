@@ -1123,3 +1123,35 @@ def test_the_product_reads_json_lines_rows_through_their_records():
     ``from_dict``), never by a literal key: a misspelt key would be a silent ``None``, a silent 0 in a count."""
     found = {path: reads for path, reads in _product_reads(row_key_reads).items() if path != "dv2s_gym/mining/jsonl.py"}
     assert not found, f"{found} read a JSON-lines row by key: read it into its record and read the record's fields"
+
+
+def test_a_conversion_s_report_and_an_exact_replay_s_row_are_typed_records(tmp_path):
+    """A conversion's report.json (the record's fields with each stage's details, its ``description`` the generated
+    description's object) reads into a ConversionOutcome, and writes back the same JSON object; a replays.jsonl row
+    into a ReplayRow, which writes back the line the replay's dict wrote."""
+    from dv2s_gym.mining.conversion.record import (ConversionOutcome, ConversionStatus, ReplayRow, read_conversion_outcome,
+                                                   read_replays)
+    from dv2s_gym.mining.jsonl import JsonlAppender
+    from scenario_bank.records import RecordError
+
+    report = {**_CONVERSION, "rejections": ["judge: no"], "description": {"text": "A car brakes.", "elements": {}},
+              "reproduction": {"rate": 0.5, "clip": {"seed": 3, "failed": False}}, "check": {"ran": True}}
+    path = tmp_path / "report.json"
+    path.write_text(json.dumps(report, indent=2) + "\n")
+    outcome = read_conversion_outcome(path)
+    assert isinstance(outcome, ConversionOutcome) and outcome.merged and outcome.status is ConversionStatus.MERGED
+    assert outcome.rejections == ("judge: no",) and outcome.reproduction["clip"]["seed"] == 3 and outcome.policy is None
+    assert outcome.to_dict() == report
+    path.write_text(json.dumps({**report, "rejections": "judge: no"}))
+    with pytest.raises(RecordError, match=r"report.json: conversion report field 'rejections'"):
+        read_conversion_outcome(path)
+    row = {"cluster": "c", "index": 3, "scenario": "s", "status": "rejected", "replay_entry": None,
+           "reason": "replay: no", "note": None, "seconds": 1.25}
+    replays = tmp_path / "replays.jsonl"
+    appender = JsonlAppender(replays)
+    appender.append(ReplayRow(cluster="c", index=3, scenario="s", status=ConversionStatus.REJECTED, reason="replay: no",
+                              seconds=1.25))
+    appender.close()
+    assert replays.read_text() == json.dumps(row, sort_keys=True) + "\n"  # the line the dict wrote
+    (read,) = read_replays(replays)
+    assert read.to_dict() == row and not read.kept and read.status is ConversionStatus.REJECTED
