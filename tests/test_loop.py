@@ -1294,8 +1294,8 @@ def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_freq
 
     errors = (["scene not sampled"] + ["worker hung"] * 3 + ["worker crashed\nTraceback ..."] * 2
               + ["a", "b", "c", "d"] + ["c"])
-    records = [{"scenario": "s1", "seed": i, "error": e} for i, e in enumerate(errors)]
-    records.append({"scenario": "s2", "seed": 0, "error": None, "failed": True})
+    records = [HeldOutEpisode(role="after", scenario="s1", seed=i, error=e) for i, e in enumerate(errors)]
+    records.append(HeldOutEpisode(role="after", scenario="s2", seed=0, failed=True))
     found = errored_episodes(records)
     assert found.to_dict()["episodes"] == 11 and found.to_dict()["scenarios"] == {"s1": 11}
     assert found.to_dict()["messages"]["s1"] == [{"message": "worker hung", "count": 3},
@@ -1308,7 +1308,8 @@ def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_freq
     assert text.startswith("worker hung (3 episodes); worker crashed (2 episodes); c (2 episodes)")
     assert text.endswith("and 2 more distinct message(s) in 2 episode(s)")
     # a later step's errors add up
-    merged = merged_messages([found, errored_episodes([{"scenario": "s1", "error": "worker hung"}])])
+    merged = merged_messages([found, errored_episodes([HeldOutEpisode(role="after", scenario="s1", seed=0,
+                                                                      error="worker hung")])])
     assert merged["s1"][0] == {"message": "worker hung", "count": 4}
     record = {"round": 1, "steps": {"mine": {"episodes": 20, "errors": 11, "errored": found}}}
     markdown = render_markdown(written_report({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo",
@@ -1323,9 +1324,11 @@ def test_merging_the_steps_error_messages_counts_each_distinct_message_once():
     three: the one the second step repeats is the same message), and its count adds up."""
     from dv2s_gym.loop.errored import errored_episodes, merged_messages, messages_text
 
-    first = errored_episodes([{"scenario": "s1", "error": f"scene rejected by requirement {i}"} for i in range(7)]
-                             + [{"scenario": "s1", "error": "scene rejected by requirement 0"}])
-    second = errored_episodes([{"scenario": "s1", "error": "scene rejected by requirement 6"}])
+    def errored(i: int, n: int) -> HeldOutEpisode:
+        return HeldOutEpisode(role="after", scenario="s1", seed=i, error=f"scene rejected by requirement {n}")
+
+    first = errored_episodes([errored(i, i) for i in range(7)] + [errored(7, 0)])
+    second = errored_episodes([errored(8, 6)])
     merged = merged_messages([first, second])
     assert len(merged["s1"]) == 7 and sum(r["count"] for r in merged["s1"]) == 9
     assert merged["s1"][:2] == [{"message": "scene rejected by requirement 0", "count": 2},

@@ -10,6 +10,7 @@ import json
 
 import pytest
 
+from dv2s_gym.mining.conversion.record import ConversionStatus, ReplayRow
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.conversion.replay import replay_failure_entry
 from dv2s_gym.mining.conversion.exact_replay import replay_failure
@@ -28,16 +29,16 @@ def record() -> dict:
 
 def test_a_failure_is_kept_as_its_exact_replay_without_a_video_or_a_script(record, tmp_path):
     out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "kept" and out["reason"] is None and out["scenario"] == SCENARIO, out
+    assert out.status == "kept" and out.reason is None and out.scenario == SCENARIO, out
     bank = Bank(tmp_path / "bank")
-    entry = bank.get(out["replay_entry"])
+    entry = bank.get(out.replay_entry)
     assert {"mined", "replay", "collision"} <= set(entry.tags) and entry.source.parent == SCENARIO
     assert entry.source.video is None and entry.source.trace == "trace.json.gz"
     assert not entry.missing_files() and (entry.folder / "trace.json.gz").is_file()
     assert entry.source.interaction["failure_type"] == "collision" and entry.source.e2e_sc == 1.0
-    assert replay_failure(bank, out["replay_entry"]).get("matches") is True  # the recorded episode, step for step
+    assert replay_failure(bank, out.replay_entry).get("matches") is True  # the recorded episode, step for step
     again = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", KEEP_LANE, bank=bank)
-    assert again["replay_entry"] == out["replay_entry"] and len(bank) == len(Bank(tmp_path / "bank"))
+    assert again.replay_entry == out.replay_entry and len(bank) == len(Bank(tmp_path / "bank"))
 
 
 def test_a_scene_the_reference_driver_failed_too_gets_no_replay_entry(record, tmp_path):
@@ -45,12 +46,12 @@ def test_a_scene_the_reference_driver_failed_too_gets_no_replay_entry(record, tm
     driver passed (it stalled here), and the note says why there is none."""
     failed = dict(record, cluster="c1", reference={"policy": "rule", "failure": {"type": "stall", "kind": "stall"}})
     out = replay_failure_entry(failed, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "kept" and out["replay_entry"] is None, out
-    assert "the reference driver failed this scene too (stall)" in out["note"]
+    assert out.status == "kept" and out.replay_entry is None, out
+    assert "the reference driver failed this scene too (stall)" in out.note
     assert len(Bank(tmp_path / "bank")) == 0
     passed = dict(failed, reference={"policy": "rule", "failure": None})
     kept = replay_failure_entry(passed, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert kept["replay_entry"] is not None and kept["note"] is None
+    assert kept.replay_entry is not None and kept.note is None
 
 
 @pytest.mark.slow
@@ -64,7 +65,7 @@ def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(recor
 
     out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     bank = Bank(tmp_path / "bank")
-    name = out["replay_entry"]
+    name = out.replay_entry
     replay = bank.get(name).source.replay
     assert replay["policy"] == "keep_lane" and replay["policy_sha256"] is None  # a driver, no checkpoint
     assert replay["dv2s_gym_version"] == installed_version() and replay["trace_version"] == TRACE_VERSION
@@ -103,12 +104,12 @@ def test_a_replay_that_does_not_match_the_recorded_episode_is_rejected_and_adds_
     tampered = json.loads(json.dumps(record))
     tampered["result"]["trajectory_hash"] = "0" * 64
     out = replay_failure_entry(tampered, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["replay_entry"] is None
-    assert out["reason"].startswith("replay: ") and "does not replay the failing episode" in out["reason"]
+    assert out.status == "rejected" and out.replay_entry is None
+    assert out.reason.startswith("replay: ") and "does not replay the failing episode" in out.reason
     assert not [e for e in Bank(tmp_path / "bank") if e.source.kind == "mined"]
     missing = replay_failure_entry({**record, "failure": None}, tmp_path / "run", KEEP_LANE,
                                    bank=tmp_path / "bank")
-    assert missing["status"] == "rejected" and missing["reason"].startswith("input: ")
+    assert missing.status == "rejected" and missing.reason.startswith("input: ")
 
 
 @pytest.mark.slow
@@ -124,12 +125,12 @@ def test_every_cluster_of_a_mining_run_gets_its_replay_once(tmp_path):
     clusters = set(group(read_records(run_dir / "episodes.jsonl")))
     assert clusters, "keep_lane fails on this scenario"
     rows = replay_clusters(run_dir, bank_dir=tmp_path / "bank", max_replays=1, progress=False)
-    assert len(rows) == 1 and rows[0]["status"] == "kept"
+    assert len(rows) == 1 and rows[0].status == "kept"
     rows = replay_clusters(run_dir, bank_dir=tmp_path / "bank", progress=False)  # resumed: the rest only
-    assert sorted(r["cluster"] for r in rows) == sorted(clusters) and len(rows) == len(clusters)
+    assert sorted(r.cluster for r in rows) == sorted(clusters) and len(rows) == len(clusters)
     assert len((run_dir / REPLAYS_FILE).read_text().splitlines()) == len(clusters)
     entries = replay_entries(run_dir)
-    kept = {r["replay_entry"] for r in rows if r["replay_entry"]}
+    kept = {r.replay_entry for r in rows if r.replay_entry}
     assert {e.scenario for e in entries} == kept and {e.parent for e in entries} == {SCENARIO}
     bank = Bank(tmp_path / "bank")
     assert all(replay_failure(bank, name).get("matches") for name in kept)
@@ -147,8 +148,8 @@ def test_a_failure_in_a_scenario_without_free_parameters_says_why_it_has_no_repl
                             elements=Bank().get(SCENARIO).elements))
     record = make_record("fixed_stopped_car", 0, {}, bank_dir=str(bank.root))
     out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", KEEP_LANE, bank=bank)
-    assert out["replay_entry"] is None and len(Bank(bank.root)) == 1
-    assert "'fixed_stopped_car' has no free parameters" in out["note"], out
+    assert out.replay_entry is None and len(Bank(bank.root)) == 1
+    assert "'fixed_stopped_car' has no free parameters" in out.note, out
 
 
 def _failed(index, family, actor, rho=0.0):
@@ -179,18 +180,18 @@ def test_exact_replays_take_the_families_in_turn_largest_cluster_first(tmp_path,
 
     def stand_in(record, run_dir, settings, *, bank, cluster):
         replayed.append(cluster)
-        return {"cluster": cluster, "index": record.index, "scenario": record.scenario, "status": "kept",
-                "replay_entry": f"replay_{len(replayed)}", "reason": None}
+        return ReplayRow(cluster=cluster, index=record.index, scenario=record.scenario, status=ConversionStatus.KEPT,
+                         replay_entry=f"replay_{len(replayed)}")
 
     monkeypatch.setattr(convert, "replay_failure_entry", stand_in)
     cluster = {(family, actor): f"{family}/collision:rear_end/{actor}-braking/ego-keeping_lane"
                for family, actor, _ in sizes}
     rows = replay_clusters(run_dir, bank_dir=tmp_path / "bank", max_replays=3, progress=False)
-    assert [r["cluster"] for r in rows] == [cluster["a", "car"], cluster["b", "car"], cluster["c", "car"]]
+    assert [r.cluster for r in rows] == [cluster["a", "car"], cluster["b", "car"], cluster["c", "car"]]
     rows = replay_clusters(run_dir, bank_dir=tmp_path / "bank", max_replays=4, progress=False)  # resumed
-    assert [r["cluster"] for r in rows][3:] == [cluster["a", "truck"]]
+    assert [r.cluster for r in rows][3:] == [cluster["a", "truck"]]
     rows = replay_clusters(run_dir, bank_dir=tmp_path / "bank", progress=False)
-    assert [r["cluster"] for r in rows][4:] == [cluster["a", "bicycle"]]
+    assert [r.cluster for r in rows][4:] == [cluster["a", "bicycle"]]
     assert len((run_dir / REPLAYS_FILE).read_text().splitlines()) == len(replayed) == 5
     from dv2s_gym.loop.replays import replay_order
 

@@ -13,6 +13,7 @@ from dv2s_gym.mining.report_record import ClusterEntry
 from dv2s_gym.loop.record import ErroredEpisodes, LoopReportBody, MiningSummary, RoundRecord
 from dv2s_gym.loop.report import _entry_clips
 from loop_helpers import written_report
+from scenario_bank.records import HeldOutEpisode, RegressEpisode
 
 KEEP_LANE = ConversionSettings(policy="keep_lane")
 """The conversion settings of the tests: the deterministic policy that fails."""
@@ -73,18 +74,19 @@ def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
     from dv2s_gym.workers.tasks import gave_up_result
 
     hung = ["the worker hung (no result after 60 s)"] * 2
-    records = [gave_up_result({"scenario": "s", "seed": seed, "role": "eval", "policy": "keep_lane"}, hung, 2)
+    records = [RegressEpisode.from_dict(gave_up_result({"scenario": "s", "seed": seed, "role": "eval",
+                                                        "policy": "keep_lane"}, hung, 2))
                for seed in (17, 4, 99)]
-    records.append({"scenario": "s", "error": "scene not sampled"})
+    records.append(HeldOutEpisode(role="eval", scenario="s", seed=0, error="scene not sampled"))
     found = errored_episodes(records)
     kind = ("the worker hung (no result after 60 s); then the worker hung (no result after 60 s) running eval "
             "'keep_lane' on s seed <seed> (2 attempts)")
-    assert found.to_dict()["messages"]["s"] == [{"message": kind, "count": 3, "example": records[0]["error"]},
+    assert found.to_dict()["messages"]["s"] == [{"message": kind, "count": 3, "example": records[0].error},
                                       {"message": "scene not sampled", "count": 1}]
     assert messages_text(found.to_dict()["messages"], "s") == f"{kind} (3 episodes, e.g. seed 17); scene not sampled (1 episode)"
     # a step recorded with one message per seed adds up with a new one by kind
     old = {"episodes": 2, "scenarios": {"s": 2},
-           "messages": {"s": [{"message": records[1]["error"], "count": 1}, {"message": records[2]["error"], "count": 1}]}}
+           "messages": {"s": [{"message": records[1].error, "count": 1}, {"message": records[2].error, "count": 1}]}}
     merged = merged_messages([ErroredEpisodes.from_dict(old), found])
     assert merged["s"][0]["message"] == kind and merged["s"][0]["count"] == 5
     lines = _errored_lines(RoundRecord.from_dict({"round": 1, "steps": {"mine": {"errored": old},
@@ -106,8 +108,8 @@ def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(t
     assert "failures/episode-000003/conversion" in out.to_dict()["reason"] and str(tmp_path) not in out.to_dict()["reason"]
     (run / "settings.json").mkdir()  # nor read the run's settings
     out = replay_failure_entry(record, run, KEEP_LANE, bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["reason"].startswith("replay: ")
-    assert str(tmp_path) not in out["reason"] and "failures/" in out["reason"]
+    assert out.status == "rejected" and out.reason.startswith("replay: ")
+    assert str(tmp_path) not in out.reason and "failures/" in out.reason
 
 
 def test_the_loop_html_shows_a_kind_with_its_seed_mark_escaped():
@@ -116,8 +118,9 @@ def test_the_loop_html_shows_a_kind_with_its_seed_mark_escaped():
     from dv2s_gym.loop.report_text import _errored_lines
     from dv2s_gym.workers.tasks import gave_up_result
 
-    found = errored_episodes([gave_up_result({"scenario": "s", "seed": seed, "role": "eval", "policy": "p"},
-                                             ["the worker hung (no result after 5 s)"], 1) for seed in (3, 8)])
+    found = errored_episodes([RegressEpisode.from_dict(gave_up_result(
+        {"scenario": "s", "seed": seed, "role": "eval", "policy": "p"}, ["the worker hung (no result after 5 s)"], 1))
+        for seed in (3, 8)])
     page = _markdown_to_html(_errored_lines(RoundRecord.from_dict({"round": 1, "steps": {"mine": {"errored": found}}})))
     assert "on s seed &lt;seed&gt; (1 attempts) (2 episodes, e.g. seed 3)" in page
 
@@ -175,3 +178,35 @@ def test_the_loop_report_lists_an_exact_replays_parameters_left_at_the_parents_d
     assert (f"  - exact replay replay_p_stall is the failing scene at its own seed only; at another seed these keep "
             f"the parent's draw: noise ({why})" in lines)
     assert not any("replay_q_stall" in line for line in lines)
+
+
+def test_the_loop_s_mining_counts_fail_loudly_on_a_line_that_is_no_episode_record(tmp_path):
+    """The loop reads a mining run's episodes.jsonl as the miner does: a line that is no episode record stops the
+    counts with the file, the episode and the bad field named (it is not skipped, which would count it as 0), and so
+    does a replays.jsonl row that is no replay row."""
+    import pytest
+
+    from dv2s_gym.loop.mined import mining_summary
+    from dv2s_gym.mining.errors import MiningError
+    from scenario_bank.records import RecordError
+
+    good = {"index": 0, "scenario": "s", "family": "s", "seed": 1, "error": "worker hung", "failure": None}
+    (tmp_path / "episodes.jsonl").write_text(json.dumps(good) + "\n")
+    summary = mining_summary(tmp_path)
+    assert (summary.episodes, summary.errors, summary.failures, summary.clusters) == (1, 1, 0, 0)
+    assert summary.errored.to_dict()["scenarios"] == {"s": 1} and summary.replays == {}
+    (tmp_path / "replays.jsonl").write_text(json.dumps({"cluster": "c", "index": 0, "status": "kept"}) + "\n"
+                                            + json.dumps({"cluster": "d", "index": 1, "status": "rejected"}) + "\n")
+    assert mining_summary(tmp_path).replays == {"kept": 1, "rejected": 1}
+    (tmp_path / "replays.jsonl").write_text(json.dumps({"cluster": "c", "index": 0, "status": "lost"}) + "\n")
+    with pytest.raises(RecordError, match=r"replays.jsonl, record 1: exact replay row field 'status' must be one of"):
+        mining_summary(tmp_path)
+    (tmp_path / "replays.jsonl").unlink()
+    (tmp_path / "episodes.jsonl").write_text(json.dumps({**good, "seed": "one"}) + "\n"
+                                             + json.dumps({**good, "index": 1}) + "\n")
+    with pytest.raises(MiningError, match=r"episodes.jsonl, episode 0: episode record field 'seed' must be an integer"):
+        mining_summary(tmp_path)
+    (tmp_path / "episodes.jsonl").write_text(json.dumps({**good, "index": "zero"}) + "\n"
+                                             + json.dumps({**good, "index": 1}) + "\n")
+    with pytest.raises(MiningError, match=r"line 1 is not an episode record \(no integer 'index'\)"):
+        mining_summary(tmp_path)

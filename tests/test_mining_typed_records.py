@@ -25,6 +25,7 @@ is its ``to_dict``.
 from __future__ import annotations
 
 import ast
+import copy
 import textwrap
 from pathlib import Path
 import json
@@ -836,6 +837,9 @@ _PRODUCT = ("dv2s_gym", "policies", "envs", "scenario_bank")
 """The product's packages."""
 _READERS = ("from_dict", "from_json", "from_checked", "of")
 """The readers whose job is to read a record's JSON object (or take the record as it is)."""
+_METRICS_REASON = ("the paper's metrics (ElementsLike) score the elements as read from a file too: a conversion report's "
+                   "detail.simulated and a label file's JSON object, as element_set reads them")
+"""Why the description metrics take an element record or its JSON object."""
 RECORD_OR_MAPPING_ALLOWED: Dict[str, str] = {
     "dv2s_gym/mining/conversion/failure_video.py:record_failure_video(record_or_trace)":
         "a user's entry point: it also takes a line of episodes.jsonl as read from the file, and names the fields "
@@ -843,8 +847,6 @@ RECORD_OR_MAPPING_ALLOWED: Dict[str, str] = {
     "dv2s_gym/mining/conversion/failure_video.py:write_failure_video(record_or_trace)":
         "a user's entry point: it also takes a line of episodes.jsonl as read from the file, and names the fields "
         "it lacks",
-    "dv2s_gym/mining/jsonl.py:JsonlAppender.append(record)":
-        "the exact replays' rows it writes are JSON objects (replay_failure_entry), beside records",
     "scenario_bank/entries.py:new_sidecar(provenance)":
         "takes the provenance a Scenic 2 upgrade returns as a JSON object (admission.upgrade_if_asked)",
     "scenario_bank/entries.py:new_provenance(provenance)":
@@ -855,6 +857,15 @@ RECORD_OR_MAPPING_ALLOWED: Dict[str, str] = {
     "scenario_bank/elements.py:element_set(data)":
         "reads the elements the description metrics are given (pipeline.metrics.ElementsLike): a record or its "
         "JSON object",
+    "dv2s_gym/pipeline/metrics.py:as_set(elements)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:scs(ground_truth)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:scs(description)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:hallucination_rate(ground_truth)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:hallucination_rate(description)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:semantic_preservation(description)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:semantic_preservation(scenario)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:e2e_sc(video_ground_truth)": _METRICS_REASON,
+    "dv2s_gym/pipeline/metrics.py:e2e_sc(simulated)": _METRICS_REASON,
     "dv2s_gym/loop/verdict.py:heldout_worse(tables)":
         "its PairedTable is the statistics' table (dv2s_gym.regress.stats), no record: the check goes by name",
 }
@@ -893,12 +904,76 @@ def _type_name(node: ast.expr) -> str:
     return text.strip("'\"").split("[")[0].split(".")[-1]
 
 
-def record_or_mapping_parameters(source: str, records: typing.AbstractSet[str]) -> List[str]:
+def type_aliases(source: str) -> Dict[str, ast.expr]:
+    """``{name: annotation}`` of the type aliases bound at the top of a module's ``source``: ``Name = <type>`` (a
+    subscripted type such as ``Sequence[Union[...]]``, or a ``|`` union) and ``Name: TypeAlias = <type>``."""
+    found: Dict[str, ast.expr] = {}
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            target, value = node.targets[0], node.value
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and node.value is not None \
+                and _type_name(node.annotation) == "TypeAlias":
+            target, value = node.target, node.value
+        else:
+            continue
+        if isinstance(value, ast.Subscript) or (isinstance(value, ast.BinOp) and isinstance(value.op, ast.BitOr)):
+            found[target.id] = value
+    return found
+
+
+def module_aliases(sources: typing.Mapping[str, str]) -> Dict[str, Dict[str, ast.expr]]:
+    """``{dotted module: {alias: annotation}}`` (:func:`type_aliases`) of ``{module path: source}``."""
+    return {path[:-3].replace("/", ".").removesuffix(".__init__"): type_aliases(source)
+            for path, source in sources.items()}
+
+
+def _aliases_in_scope(tree: ast.Module, own: Dict[str, ast.expr],
+                      imported: typing.Mapping[str, Dict[str, ast.expr]]) -> Dict[str, ast.expr]:
+    """The aliases a module's annotations can name: its own and those it imports (``from m import Alias [as A]``,
+    an alias of a module of ``imported``)."""
+    scope = dict(own)
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.module in imported:
+            for name in node.names:
+                if name.name in imported[node.module]:
+                    scope[name.asname or name.name] = imported[node.module][name.name]
+    return scope
+
+
+def _resolved(annotation: ast.expr, aliases: typing.Mapping[str, ast.expr], depth: int = 5) -> ast.expr:
+    """``annotation`` with each alias of ``aliases`` it names (``Name``, ``"Name"``, ``module.Name``) replaced by
+    what the alias stands for, aliases of aliases too (``depth`` levels)."""
+    if isinstance(annotation, ast.Constant) and isinstance(annotation.value, str):
+        try:
+            annotation = ast.parse(annotation.value, mode="eval").body
+        except SyntaxError:
+            return annotation
+
+    class Resolve(ast.NodeTransformer):
+        def visit_Name(self, node: ast.Name) -> ast.expr:
+            return aliases[node.id] if node.id in aliases else node
+
+        def visit_Attribute(self, node: ast.Attribute) -> ast.expr:
+            return aliases[node.attr] if node.attr in aliases else self.generic_visit(node)
+
+    for _ in range(depth):
+        resolved = Resolve().visit(copy.deepcopy(annotation))
+        if ast.dump(resolved) == ast.dump(annotation):
+            break
+        annotation = resolved
+    return annotation
+
+
+def record_or_mapping_parameters(source: str, records: typing.AbstractSet[str],
+                                 imported: typing.Mapping[str, Dict[str, ast.expr]] = None) -> List[str]:
     """``"<function>(<parameter>)"`` of the public functions and methods (``__init__`` of a public class too) in
     ``source`` that take a parameter annotated with a union of a record class of ``records`` and a JSON object
     (``Union[Record, Mapping[str, Any]]``, ``Record | dict``, anywhere in the annotation); the readers
-    (:data:`_READERS`) excepted."""
+    (:data:`_READERS`) excepted. A type alias the annotation names is read as what it stands for: the module's own
+    (``Records = Sequence[Union[Record, Mapping[str, Any]]]``) and one it imports from a module of ``imported``
+    (:func:`module_aliases`)."""
     tree, found = ast.parse(source), []
+    aliases = _aliases_in_scope(tree, type_aliases(source), imported or {})
     functions = [(node.name, node) for node in tree.body if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
     functions += [(f"{cls.name}.{item.name}", item) for cls in tree.body
                   if isinstance(cls, ast.ClassDef) and not cls.name.startswith("_")
@@ -909,7 +984,8 @@ def record_or_mapping_parameters(source: str, records: typing.AbstractSet[str]) 
             continue
         arguments = node.args.posonlyargs + node.args.args + node.args.kwonlyargs
         for argument in arguments:
-            unions = [_union_members(part) for part in ast.walk(argument.annotation)] if argument.annotation else []
+            annotation = _resolved(argument.annotation, aliases) if argument.annotation else None
+            unions = [_union_members(part) for part in ast.walk(annotation)] if annotation else []
             if any({_type_name(m) for m in members} & records
                    and {_type_name(m) for m in members} & {"Mapping", "Dict", "dict", "MutableMapping"}
                    for members in unions):
@@ -941,11 +1017,29 @@ def test_the_union_check_sees_a_record_or_its_json_object_taken():
             def __init__(self, data: Union[Outcome, Mapping[str, Any]]) -> None: ...
             @classmethod
             def from_dict(cls, data: Union[Outcome, Mapping[str, Any]]) -> "Reader": ...
+
+        Reports = Sequence[Union[Outcome, Mapping[str, Any]]]
+        Either: TypeAlias = Finer | dict
+        Again = Optional[Reports]
+        Records = Sequence[Outcome]
+
+        def aliased(reports: Reports, either: "Either", again: Again, records: Records) -> None: ...
     """)
     records = record_classes([planted])
     assert {"Outcome", "Finer"} <= records and "Reader" not in records
     assert record_or_mapping_parameters(planted, records) == [
-        "takes(report)", "optional(report)", "nested(episodes)", "piped(report)", "Reader.__init__(data)"]
+        "takes(report)", "optional(report)", "nested(episodes)", "piped(report)", "aliased(reports)",
+        "aliased(either)", "aliased(again)", "Reader.__init__(data)"]
+    # an alias imported from another module of the product, under its name or another
+    importing = textwrap.dedent("""
+        from dv2s_gym.loop.kinds import Reports, Records as Typed
+        from dv2s_gym.loop import kinds
+
+        def takes(reports: Reports, typed: Typed, dotted: kinds.Reports) -> None: ...
+    """)
+    imported = module_aliases({"dv2s_gym/loop/kinds.py": planted})
+    assert record_or_mapping_parameters(importing, records, imported) == ["takes(reports)", "takes(dotted)"]
+    assert record_or_mapping_parameters(importing, records) == []
 
 
 def test_no_public_product_function_takes_a_record_or_its_json_object():
@@ -956,10 +1050,108 @@ def test_no_public_product_function_takes_a_record_or_its_json_object():
     records = record_classes(sources.values())
     assert {"JsonRecord", "EpisodeRecord", "RegressReport", "LoopReportBody", "TrainRun", "FailureInteraction",
             "ReferenceOutcome", "Elements"} <= records
+    imported = module_aliases(sources)
     found = [f"{path}:{name}" for path, source in sources.items()
-             for name in record_or_mapping_parameters(source, records)]
+             for name in record_or_mapping_parameters(source, records, imported)]
     unlisted = [name for name in found if name not in RECORD_OR_MAPPING_ALLOWED]
     assert not unlisted, (f"{unlisted} take a record or its JSON object: take the record (the callers read a JSON "
                           "object with the record's from_dict), or list it in RECORD_OR_MAPPING_ALLOWED with the reason")
     stale = sorted(set(RECORD_OR_MAPPING_ALLOWED) - set(found))
     assert not stale, f"{stale} no longer take a record or its JSON object: remove them from RECORD_OR_MAPPING_ALLOWED"
+
+
+_ROW_READERS = ("read_rows",)
+"""The readers of a JSON-lines file's rows as JSON objects (:func:`dv2s_gym.mining.jsonl.read_rows`)."""
+
+
+def _reads_rows(node: ast.AST, rows: typing.AbstractSet[str]) -> bool:
+    """Whether ``node`` holds rows as read: a call of a row reader (:data:`_ROW_READERS`) or a name bound to them."""
+    return any((isinstance(part, ast.Call) and ast.unparse(part.func).split(".")[-1] in _ROW_READERS)
+               or (isinstance(part, ast.Name) and part.id in rows) for part in ast.walk(node))
+
+
+def _bound_names(target: ast.expr) -> typing.Set[str]:
+    return {node.id for node in ast.walk(target) if isinstance(node, ast.Name)}
+
+
+def row_key_reads(source: str) -> List[str]:
+    """The string-key reads (``row["cluster"]``, ``row.get("status")``) of a row a JSON-lines reader returned
+    (:data:`_ROW_READERS`) in ``source``: of the call itself, of a name bound to its rows (``rows = read_rows(p)``),
+    and of a loop's or a comprehension's name over them (``for row in read_rows(p) + read_rows(q)``, ``{r["cluster"]
+    for r in read_rows(p)}``)."""
+    tree, found = ast.parse(source), {}
+    functions = (ast.FunctionDef, ast.AsyncFunctionDef)
+    top = ast.Module(body=[node for node in tree.body if not isinstance(node, functions + (ast.ClassDef,))],
+                     type_ignores=[])
+    for scope in [top] + [node for node in ast.walk(tree) if isinstance(node, functions)]:
+        rows: typing.Set[str] = set()
+        for _ in range(3):  # a name bound to rows, then a loop over that name...
+            for node in ast.walk(scope):
+                if isinstance(node, ast.Assign) and _reads_rows(node.value, rows):
+                    rows |= set().union(*(_bound_names(t) for t in node.targets))
+                elif isinstance(node, (ast.For, ast.AsyncFor, ast.comprehension)) and _reads_rows(node.iter, rows):
+                    rows |= _bound_names(node.target)
+        for node, target, _ in _key_reads(scope):
+            if _reads_rows(target, rows):
+                found[(node.lineno, node.col_offset)] = ast.unparse(node)
+    return [found[where] for where in sorted(found)]
+
+
+def test_the_row_read_check_sees_a_json_lines_row_read_by_key():
+    planted = textwrap.dedent("""
+        def run(path, settings):
+            rows = read_rows(path)
+            first = rows[0]["cluster"]
+            for row in read_rows(path / "conversions.jsonl") + read_rows(path / "replays.jsonl"):
+                status = row.get("status", "?")
+            kept = {r["replay_entry"] for r in jsonl.read_rows(path) if r.get("replay_entry")}
+            for number, line in enumerate(rows, 1):
+                cluster = line["cluster"]
+            records = [ConversionRecord.from_dict(row) for row in read_rows(path)]
+            return read_rows(path)[0]["index"], records[0].cluster, settings["cluster"], kept
+
+        def other(records):
+            return [(record.reproduction or {}).get("rate") for record in records]
+    """)
+    assert row_key_reads(planted) == ["rows[0]['cluster']", "row.get('status', '?')", "r['replay_entry']",
+                                      "r.get('replay_entry')", "line['cluster']", "read_rows(path)[0]['index']"]
+
+
+def test_the_product_reads_json_lines_rows_through_their_records():
+    """A row of a mining run's JSON-lines files (``episodes.jsonl``, ``conversions.jsonl``, ``replays.jsonl``,
+    ``heldout.jsonl``) is read into its record (``read_records``, ``read_conversions``, ``read_replays``, a record's
+    ``from_dict``), never by a literal key: a misspelt key would be a silent ``None``, a silent 0 in a count."""
+    found = {path: reads for path, reads in _product_reads(row_key_reads).items() if path != "dv2s_gym/mining/jsonl.py"}
+    assert not found, f"{found} read a JSON-lines row by key: read it into its record and read the record's fields"
+
+
+def test_a_conversion_s_report_and_an_exact_replay_s_row_are_typed_records(tmp_path):
+    """A conversion's report.json (the record's fields with each stage's details, its ``description`` the generated
+    description's object) reads into a ConversionOutcome, and writes back the same JSON object; a replays.jsonl row
+    into a ReplayRow, which writes back the line the replay's dict wrote."""
+    from dv2s_gym.mining.conversion.record import (ConversionOutcome, ConversionStatus, ReplayRow, read_conversion_outcome,
+                                                   read_replays)
+    from dv2s_gym.mining.jsonl import JsonlAppender
+    from scenario_bank.records import RecordError
+
+    report = {**_CONVERSION, "rejections": ["judge: no"], "description": {"text": "A car brakes.", "elements": {}},
+              "reproduction": {"rate": 0.5, "clip": {"seed": 3, "failed": False}}, "check": {"ran": True}}
+    path = tmp_path / "report.json"
+    path.write_text(json.dumps(report, indent=2) + "\n")
+    outcome = read_conversion_outcome(path)
+    assert isinstance(outcome, ConversionOutcome) and outcome.merged and outcome.status is ConversionStatus.MERGED
+    assert outcome.rejections == ("judge: no",) and outcome.reproduction["clip"]["seed"] == 3 and outcome.policy is None
+    assert outcome.to_dict() == report
+    path.write_text(json.dumps({**report, "rejections": "judge: no"}))
+    with pytest.raises(RecordError, match=r"report.json: conversion report field 'rejections'"):
+        read_conversion_outcome(path)
+    row = {"cluster": "c", "index": 3, "scenario": "s", "status": "rejected", "replay_entry": None,
+           "reason": "replay: no", "note": None, "seconds": 1.25}
+    replays = tmp_path / "replays.jsonl"
+    appender = JsonlAppender(replays)
+    appender.append(ReplayRow(cluster="c", index=3, scenario="s", status=ConversionStatus.REJECTED, reason="replay: no",
+                              seconds=1.25))
+    appender.close()
+    assert replays.read_text() == json.dumps(row, sort_keys=True) + "\n"  # the line the dict wrote
+    (read,) = read_replays(replays)
+    assert read.to_dict() == row and not read.kept and read.status is ConversionStatus.REJECTED

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from scenario_bank.entries import new_provenance, new_sidecar, scan_entries
-from scenario_bank.errors import BankError
+from scenario_bank.errors import BankError, WrongTypeError
 from scenario_bank.records import (MINED_PROVENANCE_FIELDS, PROVENANCE_FIELDS, EpisodeRecord, Provenance,
                                    RecordError, Sidecar)
 
@@ -193,7 +193,9 @@ def test_the_miner_writes_and_reads_its_records_as_episode_records(tmp_path):
     path = tmp_path / "episodes.jsonl"
     appender = JsonlAppender(path)
     appender.append(EpisodeRecord.from_dict(EPISODE))
-    appender.append({**EPISODE, "index": 4, "behaviour": None})
+    appender.append(EpisodeRecord.from_dict({**EPISODE, "index": 4, "behaviour": None}))
+    with pytest.raises(WrongTypeError, match="episodes.jsonl holds typed records, not dict: read a JSON object"):
+        appender.append({**EPISODE, "index": 5})
     appender.close()
     lines = path.read_bytes().splitlines()
     assert lines[0] == json.dumps(EPISODE, sort_keys=True).encode("utf-8")

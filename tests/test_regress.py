@@ -234,11 +234,14 @@ def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):
     failed = report.to_dict()["newly_failing"][0]
     video = tmp_path / "failed.webm"
     result = replay_episode(out / "report.json", failed, video=video)
-    assert result["source"] == "trace" and result["matches"] and video.stat().st_size > 0
-    assert replay_episode(out / "report.json", failed, from_policy=True)["matches"]  # the noisy policy too
+    assert result.source == "trace" and result.matches and video.stat().st_size > 0
+    assert result.to_dict() == {"id": failed, "role": "candidate", "source": "trace", "steps": result.steps,
+                                "trajectory_hash": result.expected_hash, "expected_hash": result.expected_hash,
+                                "matches": True, "video": str(video)}
+    assert replay_episode(out / "report.json", failed, from_policy=True).matches  # the noisy policy too
     passed = next(e["id"] for e in report.to_dict()["episodes"] if not e["baseline"]["failed"])
     again = replay_episode(out / "report.json", passed, role="baseline")
-    assert again["source"] == "policy" and again["matches"]
+    assert again.source == "policy" and again.matches and again.video is None
     with pytest.raises(RegressError, match="no episode 'nowhere/1'"):
         replay_episode(out / "report.json", "nowhere/1")
 

@@ -82,9 +82,8 @@ def _replay_report(args: argparse.Namespace) -> int:
                          "(its newly_failing list and report.md show the failed ones)")
     result = replay_episode(args.trace, args.episode, role=args.policy, video=args.video,
                             from_policy=args.from_policy, spec=args.policy_spec)
-    how = "trace replayed, every actor state matches" if result["source"] == "trace" else "policy re-run"
-    verdict = "matches the report" if result["matches"] else (
-        f"DIFFERS from the report ({result['expected_hash']})")
-    print(f"{result['id']} ({result['role']}): {how}; {result['steps']} steps; trajectory hash "
-          f"{result['trajectory_hash'][:16]} {verdict}" + (f"; video {result['video']}" if result["video"] else ""))
-    return 0 if result["matches"] else 1
+    how = "trace replayed, every actor state matches" if result.source == "trace" else "policy re-run"
+    verdict = "matches the report" if result.matches else f"DIFFERS from the report ({result.expected_hash})"
+    print(f"{result.id} ({result.role}): {how}; {result.steps} steps; trajectory hash "
+          f"{result.trajectory_hash[:16]} {verdict}" + (f"; video {result.video}" if result.video else ""))
+    return 0 if result.matches else 1

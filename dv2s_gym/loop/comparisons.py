@@ -82,8 +82,8 @@ def _regress_errored(report: RegressReport, roles: Mapping[str, str]) -> Dict[st
     report = RegressReport.from_json(report)
     found: Dict[str, Dict[str, Any]] = {}
     for role, name in roles.items():
-        found[name] = errored_episodes([{"scenario": e.scenario, "error": e.result(role).error}
-                                        for e in report.episodes or () if e.result(role) is not None])
+        found[name] = errored_episodes([e.result(role).replace(scenario=e.scenario)
+                                        for e in report.episodes or () if e.errored(role)])
     return found
 
 

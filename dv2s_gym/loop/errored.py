@@ -8,7 +8,7 @@ reports, each scenario with its distinct error messages and how many episodes en
 from __future__ import annotations
 
 import re
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Union
 
 from dv2s_gym.loop.record import ErroredEpisodes
 from scenario_bank.records import EpisodeRecord, HeldOutEpisode, RegressEpisode
@@ -38,17 +38,9 @@ def message_kind(message: str) -> str:
     return _SEED.sub(SEED_MARK, str(message))
 
 
-EpisodeRecords = Sequence[Union[EpisodeRecord, HeldOutEpisode, RegressEpisode, Mapping[str, Any]]]
-"""Episode records (of a mining run, a held-out evaluation or a regression run), or their JSON objects as the
-run's files hold them (``episodes.jsonl`` rows)."""
-
-
-def _scenario_error(record: Union[EpisodeRecord, HeldOutEpisode, RegressEpisode, Mapping[str, Any]]
-                    ) -> Tuple[Any, Any]:
-    """The scenario and the error of an episode record or of its JSON object."""
-    if isinstance(record, Mapping):
-        return record.get("scenario"), record.get("error")
-    return record.scenario, record.error
+EpisodeRecords = Sequence[Union[EpisodeRecord, HeldOutEpisode, RegressEpisode]]
+"""Episode records: of a mining run (``episodes.jsonl``), a held-out evaluation (``heldout.jsonl``) or a regression
+run (a report's results)."""
 
 
 def errored_episodes(records: EpisodeRecords) -> ErroredEpisodes:
@@ -65,10 +57,9 @@ def errored_episodes(records: EpisodeRecords) -> ErroredEpisodes:
     examples: Dict[str, Dict[str, str]] = {}
     firsts: Dict[str, str] = {}
     for record in records:
-        scenario, error = _scenario_error(record)
-        if not error:
+        if not record.error:
             continue
-        name = str(scenario)
+        name, error = str(record.scenario), record.error
         scenarios[name] = scenarios.get(name, 0) + 1
         found = counts.setdefault(name, {})
         message = error_message(error)

@@ -11,11 +11,10 @@ from dv2s_gym.loop.errored import errored_episodes
 from dv2s_gym.loop.record import MinedEntry, MiningSummary
 from dv2s_gym.loop.replays import REPLAYS_FILE, reference_passed, replay_entries
 from dv2s_gym.mining.cluster import cluster_failures, group
-from dv2s_gym.mining.conversion.record import read_conversions
+from dv2s_gym.mining.conversion.record import read_conversions, read_replays
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import scenario_family
-from dv2s_gym.mining.jsonl import read_rows
-from scenario_bank.records import EpisodeRecord, RecordError
+from dv2s_gym.mining.miner import read_records
 
 __all__ = ["mined_entries", "mining_summary", "with_parents"]
 
@@ -45,22 +44,18 @@ def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Min
 
 
 def mining_summary(mine_out: Path) -> MiningSummary:
-    """Counts read from a mining run folder (episodes, failures, avoidable ones, clusters, conversions)."""
-    episodes, failures, counted, errors = 0, 0, 0, 0
-    records = read_rows(mine_out / "episodes.jsonl")
-    for record in records:
-        episodes += 1
-        errors += bool(record.get("error"))
-        if record.get("failure"):
-            failures += 1
-            counted += record.get("avoidable") is not False  # as MineRun.avoidable
-    episode_records: Optional[List[EpisodeRecord]] = None
-    clusters = None
+    """Counts read from a mining run folder (episodes, failures, avoidable ones, clusters, conversions). Its
+    ``episodes.jsonl`` is read as the miner reads it (:func:`~dv2s_gym.mining.miner.read_records`): a line that is
+    no episode record is a :class:`~dv2s_gym.mining.errors.MiningError` naming it."""
+    records = read_records(mine_out / "episodes.jsonl")
+    episodes, errors = len(records), sum(1 for record in records if record.error)
+    failures = sum(1 for record in records if record.failure is not None)
+    counted = sum(1 for record in records if record.failure is not None and record.avoidable is not False)  # as MineRun.avoidable
+    clusters: Optional[int] = None
     try:
-        episode_records = [EpisodeRecord.from_dict(r) for r in records]
-        clusters = len(set(cluster_failures(episode_records).values()))
-    except (RecordError, MiningError):  # a record the counts cannot read: they are informative, the loop goes on
-        episode_records = None
+        clusters = len(set(cluster_failures(records).values()))
+    except MiningError:  # records the clusters cannot group (no family): the counts are informative, the loop goes on
+        pass
     statuses: Dict[str, int] = {}
     reasons: List[str] = []
     conversions = read_conversions(mine_out / "conversions.jsonl")
@@ -73,16 +68,13 @@ def mining_summary(mine_out: Path) -> MiningSummary:
     tried = {str(record.cluster) for record in conversions}
     # clusters no conversion tried whose every failing scene the reference driver failed too: never replayed
     reference_failed = None
-    try:
-        reference_failed = None if episode_records is None else sum(
-            1 for cluster, members in group(episode_records).items()
-            if cluster not in tried and not any(reference_passed(r) for r in members))
-    except (RecordError, MiningError):  # informative, as the cluster count
-        pass
-
+    if clusters is not None:
+        reference_failed = sum(1 for cluster, members in group(records).items()
+                               if cluster not in tried and not any(reference_passed(r) for r in members))
     replayed: Dict[str, int] = {}
-    for row in read_rows(mine_out / REPLAYS_FILE):
-        replayed[row.get("status", "?")] = replayed.get(row.get("status", "?"), 0) + 1
+    for row in read_replays(mine_out / REPLAYS_FILE):
+        status = str(row.status) if row.status is not None else "?"
+        replayed[status] = replayed.get(status, 0) + 1
     return MiningSummary(replays=replayed, episodes=episodes, errors=errors, errored=errored_episodes(records),
                          failures=failures, failures_against_policy=counted,
                          clusters=clusters, conversions=statuses, rejected_reasons=tuple(reasons[:40]),

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.mining.conversion import convert
 from dv2s_gym.mining.conversion.settings import ConversionSettings
@@ -22,7 +22,8 @@ from dv2s_gym.mining.conversion.episodes import reference_passed
 from dv2s_gym.mining.cluster import group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family
-from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
+from dv2s_gym.mining.conversion.record import ConversionRecord, read_conversions, read_replays, ReplayRow
+from dv2s_gym.mining.jsonl import JsonlAppender
 from dv2s_gym.loop.record import MinedEntry
 from dv2s_gym.mining.miner import progress_bar, read_records
 from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
@@ -36,21 +37,22 @@ REPLAYS_FILE = "replays.jsonl"
 
 
 def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
-                    max_replays: Optional[int] = None, progress: bool = True) -> List[Dict[str, Any]]:
+                    max_replays: Optional[int] = None, progress: bool = True) -> List[ReplayRow]:
     """Add the exact replay of one failure per avoidable cluster of the mining run in ``run_dir`` to the bank in
     ``bank_dir`` (the loop's working bank; the parent scripts come from the bank the run mined), skipping clusters a conversion or an earlier call has tried;
     at most ``max_replays`` rows in ``replays.jsonl`` (``None``: every cluster), the clusters taken round-robin over
     the families (:func:`replay_order`). The representative failure is the
     one the conversion would take (lowest robustness, then lowest index). Returns every row of the run's
-    ``replays.jsonl`` (:func:`dv2s_gym.mining.conversion.replay.replay_failure_entry`'s records)."""
+    ``replays.jsonl`` (:class:`~dv2s_gym.mining.conversion.record.ReplayRow`: what
+    :func:`dv2s_gym.mining.conversion.replay.replay_failure_entry` returns)."""
     run_dir = Path(run_dir)
     settings = read_run_settings(run_dir)
     if settings is None:
         raise MiningError(f"{run_dir} holds no mining run (no {SETTINGS_FILE}); mine into it first")
     path = run_dir / REPLAYS_FILE
-    existing = read_rows(path)
-    converted = {str(row.get("cluster")) for row in read_rows(run_dir / "conversions.jsonl")}
-    replayed = {str(row.get("cluster")) for row in existing}
+    existing = read_replays(path)
+    converted = {str(record.cluster) for record in read_conversions(run_dir / "conversions.jsonl")}
+    replayed = {str(row.cluster) for row in existing}
     groups = group(read_records(run_dir / "episodes.jsonl"))
     room = None if max_replays is None else max(0, int(max_replays) - len(existing))
     # the order over every cluster no conversion tried, so a resumed call goes on where a first call stopped
@@ -115,18 +117,20 @@ def replay_entries(run_dir: os.PathLike | str) -> List[MinedEntry]:
     run_dir = Path(run_dir)
     found: Dict[str, MinedEntry] = {}
     episodes = None
-    for row in read_rows(run_dir / "conversions.jsonl") + read_rows(run_dir / REPLAYS_FILE):
-        name = row.get("replay_entry")
+    rows: List[Union[ConversionRecord, ReplayRow]] = [*read_conversions(run_dir / "conversions.jsonl"),
+                                                      *read_replays(run_dir / REPLAYS_FILE)]
+    for row in rows:
+        name = row.replay_entry
         if not name or name in found:
             continue
-        parent = row.get("scenario")
+        parent = row.scenario if isinstance(row, ReplayRow) else None
         if not parent:  # conversion rows do not name the parent: the failing episode does
             if episodes is None:
                 episodes = {r.index: r for r in read_records(run_dir / "episodes.jsonl")}
-            episode = episodes.get(row.get("index"))
+            episode = episodes.get(row.index)
             parent = episode.scenario if episode is not None else None
         # not_narrowed: parameters the replay leaves at the parent's distribution, with why
-        found[name] = MinedEntry(cluster=str(row.get("cluster")), scenario=name, parent=parent, reproduction=None,
-                                 replay=True, not_narrowed=dict(row["replay_not_narrowed"])
-                                 if row.get("replay_not_narrowed") else None)
+        found[name] = MinedEntry(cluster=str(row.cluster), scenario=name, parent=parent, reproduction=None,
+                                 replay=True, not_narrowed=dict(row.replay_not_narrowed)
+                                 if row.replay_not_narrowed else None)
     return [found[name] for name in sorted(found)]

@@ -99,7 +99,6 @@ and the Markdown form are :mod:`dv2s_gym.loop.report_text`, the page :mod:`dv2s_
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from pathlib import Path
@@ -111,7 +110,7 @@ from dv2s_gym.loop.report_text import (errored_note, errored_text, rate_text, re
                                        report_rounds, round_summary)
 from dv2s_gym.loop.verdict import ACCEPTED, judge_round, recommendation
 from dv2s_gym.mining.conversion.files import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
-from dv2s_gym.mining.conversion.record import ConversionStatus
+from dv2s_gym.mining.conversion.record import ConversionOutcome, read_conversion_outcome
 from dv2s_gym.mining.report_text import clip_caption
 from dv2s_gym.regress.records import BankInfo, PairedComparison, PairedEpisode, Summary
 from dv2s_gym.regress.report import build_report, load_report, write_json
@@ -279,24 +278,29 @@ def _rejection_note(rejections: Any) -> Optional[str]:
             "keeps the exact replay of the failing scene, so only the failure clip is shown")
 
 
-def _conversion_record(mine: MiningSummary, cluster: Any) -> Dict[str, Any]:
-    """The mining run's conversion record of ``cluster`` (its ``failures/<slug>/conversion/report.json``, the
-    conversion's file as written); ``{}`` when there is none."""
+def _conversion_outcome(mine: MiningSummary, cluster: Any) -> Optional[ConversionOutcome]:
+    """The mining run's conversion report of ``cluster`` (its ``failures/<slug>/conversion/report.json``, the
+    conversion's file as written); ``None`` when there is none or it cannot be read (the clips are extra)."""
     if not mine.folder or cluster is None:
-        return {}
+        return None
     try:
-        record = json.loads((Path(mine.folder) / "failures" / cluster_slug(cluster, None) / CONVERSION_DIR
-                             / "report.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    return record if isinstance(record, dict) else {}
+        return read_conversion_outcome(Path(mine.folder) / "failures" / cluster_slug(cluster, None) / CONVERSION_DIR
+                                       / "report.json")
+    except (OSError, ValueError):  # RecordError is a ValueError
+        return None
+
+
+def _conversion_rejections(mine: MiningSummary, cluster: Any) -> Optional[List[str]]:
+    """Every failed check of the conversion of ``cluster`` (:func:`_conversion_outcome`); ``None`` without one."""
+    outcome = _conversion_outcome(mine, cluster)
+    return list(outcome.rejections) if outcome is not None and outcome.rejections is not None else None
 
 
 def _no_clip_reason(entry: MinedEntry, folder: Path, mine: MiningSummary) -> str:
     """Why a kept mined scenario shows no clip in the loop report."""
     source = _entry_source(folder) if folder.is_dir() else {}
     rejected = _rejection_note(source.get("converted_rejections")
-                               or _conversion_record(mine, entry.cluster).get("rejections"))
+                               or _conversion_rejections(mine, entry.cluster))
     if rejected:
         return ("no clip: " + rejected.split(": the bank keeps", 1)[0] + "; no clip of the failure was found")
     if entry.replay or source.get("replay"):
@@ -360,18 +364,16 @@ def _entry_clips(entry: MinedEntry, folder: Path, mine: MiningSummary, policy: O
             return found
     if mine.folder:  # the bank entry is gone: the mining run's copy
         run = Path(mine.folder) / "failures" / cluster_slug(cluster, None)
-        run_note = ((_rejection_note(_conversion_record(mine, cluster).get("rejections")) or replay_note)
+        run_note = ((_rejection_note(_conversion_rejections(mine, cluster)) or replay_note)
                     if entry.replay else None)
         for video in sorted(run.glob("*.webm")) if run.is_dir() else []:
             found.append((video, f"failure of cluster {cluster} (mining run)", "run", run_note))
         converted = run / CONVERSION_DIR / ENTRY_CONVERTED_VIDEO
         if found and not entry.replay and converted.is_file():
-            try:
-                conversion = json.loads((run / CONVERSION_DIR / "report.json").read_text())
-            except (OSError, ValueError):
-                conversion = {}
-            caption = clip_caption(scenario, {**conversion, "policy": conversion.get("policy") or policy},
-                                   merged=conversion.get("status") == ConversionStatus.MERGED)
+            conversion = _conversion_outcome(mine, cluster) or ConversionOutcome()
+            # the caption reads the reproduction's clip and the policy, as it reads an entry's provenance
+            caption = clip_caption(scenario, {"reproduction": conversion.reproduction,
+                                              "policy": conversion.policy or policy}, merged=conversion.merged)
             found.append((converted, caption + " (mining run)", "run", None))
     return found
 

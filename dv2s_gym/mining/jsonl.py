@@ -6,8 +6,9 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Union
+from typing import Any, Dict, List
 
+from scenario_bank.errors import WrongTypeError
 from scenario_bank.records import JsonRecord
 
 __all__ = ["JsonlAppender", "read_rows"]
@@ -26,12 +27,14 @@ class JsonlAppender:
                     handle.truncate(data.rfind(b"\n") + 1)
         self._handle = open(path, "ab")
 
-    def append(self, record: Union[JsonRecord, Mapping[str, Any]]) -> None:
-        """Write ``record`` (a JSON object, or a typed record: :class:`~scenario_bank.records.JsonRecord`) as one
-        line."""
-        record = record.to_dict() if isinstance(record, JsonRecord) else record
+    def append(self, record: JsonRecord) -> None:
+        """Write ``record`` (a typed record: :class:`~scenario_bank.records.JsonRecord`) as one line, its
+        :meth:`~scenario_bank.records.JsonRecord.to_dict` with sorted keys."""
+        if not isinstance(record, JsonRecord):
+            raise WrongTypeError(f"{self._path.name} holds typed records, not {type(record).__name__}: read a JSON "
+                                 "object into its record (the record class's from_dict) before appending it")
         try:
-            self._handle.write(json.dumps(record, sort_keys=True, default=str).encode("utf-8") + b"\n")
+            self._handle.write(json.dumps(record.to_dict(), sort_keys=True, default=str).encode("utf-8") + b"\n")
             self._handle.flush()
             os.fsync(self._handle.fileno())
         except OSError as error:  # a full disk...: name the file (a torn line is dropped when it is opened again)

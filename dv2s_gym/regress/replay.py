@@ -11,13 +11,14 @@ report's. Either way a video can be written.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, ClassVar, FrozenSet, List, Mapping, Optional, Tuple, Union
 import difflib
 
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.records import BankInfo, RegressReport
-from scenario_bank.records import RegressEpisode, recorded
+from scenario_bank.records import JsonRecord, RegressEpisode, recorded
 from dv2s_gym.regress.report import bank_info, load_report
 from envs.recording import VideoWriter
 from envs.trace import EpisodeTrace
@@ -25,7 +26,33 @@ from envs.trace_bounds import check_file_config
 from policies.evaluation import trajectory_hash, make_eval_env, run_episode
 from policies.registry import load_policy, spec_from_file
 
-__all__ = ["find_episode", "replay_episode", "bank_for_scenario"]
+__all__ = ["EpisodeReplay", "find_episode", "replay_episode", "bank_for_scenario"]
+
+
+@dataclass(frozen=True, eq=False)
+class EpisodeReplay(JsonRecord):
+    """What replaying one episode of a regression report found (:func:`replay_episode`): the episode's ``id`` and
+    the policy's ``role``, how it was replayed (``source``: ``"trace"``, the stored trace step for step, or
+    ``"policy"``, the policy re-run), the ``steps`` it ran, the ``trajectory_hash`` it produced and the
+    ``expected_hash`` the report holds, whether they ``matches``, and the ``video`` written (``None`` without
+    one). Every field is written, ``null`` when ``None``."""
+
+    id: str
+    role: str
+    source: str
+    steps: Optional[int] = None
+    trajectory_hash: Optional[str] = None
+    expected_hash: Optional[str] = None
+    matches: Optional[bool] = None
+    video: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("id", "role", "source")
+    _WHAT: ClassVar[str] = "episode replay"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"steps", "trajectory_hash", "expected_hash", "matches", "video"})
 
 
 def find_episode(report: RegressReport, episode_id: str, role: str = "candidate") -> RegressEpisode:
@@ -52,16 +79,15 @@ def find_episode(report: RegressReport, episode_id: str, role: str = "candidate"
 
 def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: str = "candidate",
                    video: Optional[Union[str, os.PathLike]] = None, from_policy: bool = False,
-                   spec: Optional[str] = None) -> Dict[str, Any]:
+                   spec: Optional[str] = None) -> EpisodeReplay:
     """Re-run one episode of a report and check its trajectory hash.
 
     A re-run loads the policy ``spec`` (the caller's), else the report's spec for ``role``, and that only if
     it is a built-in policy (:func:`~policies.registry.spec_from_file`): a report is data.
 
-    Returns ``{"id", "role", "source": "trace" | "policy", "steps", "trajectory_hash",
-    "expected_hash", "matches", "video"}``; ``matches`` is False when the hash differs (a
-    diverging actor state in a trace replay raises
-    :class:`~envs.trace.TraceMismatchError` instead).
+    Returns the :class:`EpisodeReplay` (its JSON object ``{"id", "role", "source": "trace" | "policy", "steps",
+    "trajectory_hash", "expected_hash", "matches", "video"}``); ``matches`` is False when the hash differs (a
+    diverging actor state in a trace replay raises :class:`~envs.trace.TraceMismatchError` instead).
     """
     report_path = Path(report_path)
     report = load_report(report_path)
@@ -92,8 +118,8 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
                 writer.write(frame)
         written = str(video)
     expected = result.trajectory_hash
-    return {"id": episode_id, "role": role, "source": source, "steps": steps, "trajectory_hash": digest,
-            "expected_hash": expected, "matches": digest == expected, "video": written}
+    return EpisodeReplay(id=episode_id, role=role, source=source, steps=steps, trajectory_hash=digest,
+                         expected_hash=expected, matches=digest == expected, video=written)
 
 
 def _from_trace(path: str, frames: Optional[List[Any]]):

@@ -8,6 +8,7 @@ is a :class:`ConversionStatus`.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
@@ -16,7 +17,8 @@ from typing import Any, ClassVar, Dict, FrozenSet, List, Mapping, Optional, Tupl
 from dv2s_gym.mining.jsonl import read_rows
 from scenario_bank.records import JsonRecord, RecordError
 
-__all__ = ["ConversionStatus", "ConversionRecord", "read_conversions", "ALWAYS_WRITTEN"]
+__all__ = ["ConversionStatus", "ConversionRecord", "read_conversions", "ALWAYS_WRITTEN", "ReplayRow",
+           "REPLAY_ALWAYS_WRITTEN", "read_replays", "ConversionOutcome", "read_conversion_outcome"]
 
 
 class ConversionStatus(StrEnum):
@@ -84,19 +86,10 @@ class ConversionRecord(JsonRecord):
 
     @classmethod
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
-        if "status" not in data or data["status"] is None:
-            return {}
-        try:
-            return {"status": ConversionStatus(data["status"])}
-        except ValueError:
-            raise RecordError(f"conversion record field 'status' must be one of "
-                              f"{', '.join(repr(s.value) for s in ConversionStatus)}, not {data['status']!r}") from None
+        return _status(data, cls._WHAT)
 
     def to_dict(self) -> Dict[str, Any]:
-        out = super().to_dict()
-        if isinstance(out.get("status"), ConversionStatus):
-            out["status"] = out["status"].value
-        return out
+        return _status_written(super().to_dict())
 
     @property
     def kept(self) -> bool:
@@ -114,6 +107,24 @@ class ConversionRecord(JsonRecord):
         return self.status == ConversionStatus.REJECTED
 
 
+def _status(data: Mapping[str, Any], what: str) -> Dict[str, Any]:
+    """The ``status`` of a record's JSON object ``data`` as a :class:`ConversionStatus` (none when absent or
+    ``null``); another word is a :class:`~scenario_bank.records.RecordError` naming the ones it can be."""
+    if "status" not in data or data["status"] is None:
+        return {}
+    try:
+        return {"status": ConversionStatus(data["status"])}
+    except ValueError:
+        raise RecordError(f"{what} field 'status' must be one of "
+                          f"{', '.join(repr(s.value) for s in ConversionStatus)}, not {data['status']!r}") from None
+
+
+def _status_written(out: Dict[str, Any]) -> Dict[str, Any]:
+    if isinstance(out.get("status"), ConversionStatus):
+        out["status"] = out["status"].value
+    return out
+
+
 def read_conversions(path: Path) -> List[ConversionRecord]:
     """The conversion records of a ``conversions.jsonl`` (none when it does not exist; a torn last line, left by a
     kill mid-write, is left out: its conversion runs again); a line that is no conversion record is a
@@ -126,3 +137,105 @@ def read_conversions(path: Path) -> List[ConversionRecord]:
             raise RecordError(f"{path}, record {number}: {error}; remove that line (its cluster is converted "
                               "again on resume)") from None
     return records
+
+
+REPLAY_ALWAYS_WRITTEN = ("cluster", "index", "scenario", "status", "replay_entry", "reason", "note", "seconds")
+"""The fields every exact replay's row writes, ``null`` when it has none."""
+
+
+@dataclass(frozen=True, eq=False)
+class ReplayRow(JsonRecord):
+    """The exact replay of one failure cluster kept without a conversion: a line of a mining run's
+    ``replays.jsonl``, what :func:`~dv2s_gym.mining.conversion.replay.replay_failure_entry` returns. The ``cluster``,
+    the failing episode's ``index`` and ``scenario`` (the replay's parent), the ``status`` (:class:`ConversionStatus`:
+    ``kept`` or ``rejected``), the ``replay_entry`` kept (``None`` with a ``note`` when the bank holds the scene
+    already under another name), the rejection's ``reason``, the ``seconds`` it took and, when kept, the parameters
+    the replay leaves at the parent's distribution (``replay_not_narrowed``: ``{parameter: why}``). Other keys are
+    kept in ``extra``.
+
+    ``null_fields``: the fields written as ``null`` when ``None``; by default :data:`REPLAY_ALWAYS_WRITTEN`.
+    """
+
+    cluster: Optional[str] = None
+    index: Optional[int] = None
+    scenario: Optional[str] = None
+    status: Optional[ConversionStatus] = None
+    replay_entry: Optional[str] = None
+    reason: Optional[str] = None
+    note: Optional[str] = None
+    seconds: Optional[float] = None
+    replay_not_narrowed: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _WHAT: ClassVar[str] = "exact replay row"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(REPLAY_ALWAYS_WRITTEN)
+
+    @classmethod
+    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
+        return _status(data, cls._WHAT)
+
+    def to_dict(self) -> Dict[str, Any]:
+        return _status_written(super().to_dict())
+
+    @property
+    def kept(self) -> bool:
+        """Whether the exact replay was kept (with an entry, or with a ``note`` naming the bank's twin)."""
+        return self.status == ConversionStatus.KEPT
+
+
+def read_replays(path: Path) -> List[ReplayRow]:
+    """The rows of a ``replays.jsonl`` (none when it does not exist; a torn last line, left by a kill mid-write, is
+    left out: its cluster is replayed again); a line that is no replay row is a
+    :class:`~scenario_bank.records.RecordError` naming the file, the line and its bad field."""
+    rows = []
+    for number, row in enumerate(read_rows(path), 1):
+        try:
+            rows.append(ReplayRow.from_dict(row))
+        except RecordError as error:
+            raise RecordError(f"{path}, record {number}: {error}; remove that line (its cluster is replayed again "
+                              "on resume)") from None
+    return rows
+
+
+@dataclass(frozen=True, eq=False)
+class ConversionOutcome(JsonRecord):
+    """A conversion's ``report.json`` (``failures/<cluster slug>/conversion/report.json`` of a mining run): the
+    conversion record's fields (:class:`ConversionRecord`) with what each stage recorded beside them. Typed here are
+    the fields the loop's report reads: the ``status`` (:class:`ConversionStatus`), every failed check
+    (``rejections``), the ``reproduction`` check (with its ``clip``) and the ``policy`` the clip shows when the
+    file names one; the rest of the file is kept in ``extra``. Absent keys stay absent."""
+
+    status: Optional[ConversionStatus] = None
+    rejections: Optional[Tuple[str, ...]] = None
+    reproduction: Optional[Mapping[str, Any]] = None
+    policy: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _WHAT: ClassVar[str] = "conversion report"
+
+    @classmethod
+    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
+        return _status(data, cls._WHAT)
+
+    def to_dict(self) -> Dict[str, Any]:
+        return _status_written(super().to_dict())
+
+    @property
+    def merged(self) -> bool:
+        """Whether the converted script was merged into the bank entry it nearly duplicates."""
+        return self.status == ConversionStatus.MERGED
+
+
+def read_conversion_outcome(path: Path) -> ConversionOutcome:
+    """The :class:`ConversionOutcome` of a conversion's ``report.json`` at ``path``. Raises ``OSError`` when it
+    cannot be read, ``ValueError`` when it is no JSON, and :class:`~scenario_bank.records.RecordError` (a
+    ``ValueError``) when it is no conversion report (naming the file and the bad field)."""
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    try:
+        return ConversionOutcome.from_dict(data)
+    except RecordError as error:
+        raise RecordError(f"{path}: {error}") from None

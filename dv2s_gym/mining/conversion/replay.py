@@ -17,6 +17,7 @@ from typing import Any, Dict, Mapping, Optional, Union
 from dv2s_gym.mining.conversion.episodes import monitor_options, policy_name, reference_passed
 from dv2s_gym.mining.conversion.files import (cluster_slug, CONVERSION_DIR, ENTRY_TRACE, ENTRY_VIDEO, provenance_run,
                                               relative_to_run, write_run_file)
+from dv2s_gym.mining.conversion.record import ConversionStatus, ReplayRow
 from dv2s_gym.mining.conversion.rejection import check_settings, ConversionRejected, SETUP_ERRORS, stage_error
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.conversion.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
@@ -154,7 +155,7 @@ def _bank_replay(out: Dict[str, Any], record: EpisodeRecord, bank, parent: Any, 
 
 
 def replay_failure_entry(record: EpisodeRecord, run_dir: PathLike, settings: ConversionSettings, *, bank: Any,
-                         cluster: Optional[str] = None) -> Dict[str, Any]:
+                         cluster: Optional[str] = None) -> ReplayRow:
     """Keep one failure exactly, without converting it: only the exact replay entry of the failing scene
     (stage 3 of :func:`~dv2s_gym.mining.conversion.convert.convert_failure`, with no video, description or script; the entry keeps
     the replay's trace). Never raises for a bad failure; raises ``WrongTypeError`` when ``settings`` is not a
@@ -166,18 +167,17 @@ def replay_failure_entry(record: EpisodeRecord, run_dir: PathLike, settings: Con
     the record's scenario (default the ``bank`` when it holds it, else the shipped bank) and the ``monitor``
     (default the run's ``settings.json``'s).
 
-    Returns ``{"cluster", "index", "scenario", "status": "kept"|"rejected", "replay_entry", "reason",
-    "note", "seconds"}`` (and ``replay_not_narrowed`` when kept: ``{parameter: why}`` of those the replay leaves at
-    the parent's distribution): ``kept`` with the entry's name, or ``rejected`` with the reason (a replay that
-    diverges from the recorded episode, a bad record); ``kept`` with no entry and a ``note`` when the bank
-    holds the scene already under another name."""
+    Returns the :class:`~dv2s_gym.mining.conversion.record.ReplayRow` of the cluster (a line of ``replays.jsonl``):
+    ``kept`` with the entry's name (and ``replay_not_narrowed``: ``{parameter: why}`` of the parameters the replay
+    leaves at the parent's distribution), or ``rejected`` with the reason (a replay that diverges from the recorded
+    episode, a bad record); ``kept`` with no entry and a ``note`` when the bank holds the scene already under another
+    name."""
     check_settings(settings, "replay_failure_entry")
     start = time.perf_counter()
     run_dir = Path(run_dir)
     record = EpisodeRecord.from_dict(record)
     cluster = cluster if cluster is not None else record.extra.get("cluster")
-    out: Dict[str, Any] = {"cluster": cluster, "index": record.index, "scenario": record.scenario,
-                           "status": "rejected", "replay_entry": None, "reason": None, "note": None, "seconds": None}
+    row = ReplayRow(cluster=cluster, index=record.index, scenario=record.scenario, status=ConversionStatus.REJECTED)
     try:
         failure = record.failure
         if failure is None or not failure.type:
@@ -190,19 +190,18 @@ def replay_failure_entry(record: EpisodeRecord, run_dir: PathLike, settings: Con
             settings = settings.replace(bank_dir=bank.root)
         settings = settings.replace(monitor=monitor_options(run_dir, settings.monitor))
         replay = add_replay(record, bank, settings, ReplaySource(failure, cluster, run_dir))
-        out.update(status="kept", replay_entry=replay["entry"], note=replay["note"],
-                   replay_not_narrowed=dict(replay.get("not_narrowed") or {}))
+        row = row.replace(status=ConversionStatus.KEPT, replay_entry=replay["entry"], note=replay["note"],
+                          replay_not_narrowed=dict(replay.get("not_narrowed") or {}))
     except ConversionRejected as rejection:
-        out["reason"] = str(rejection)
+        row = row.replace(reason=str(rejection))
     except SETUP_ERRORS:
         raise
     except Exception as error:  # a bad failure is a rejection, never an exception
         first = (str(error).strip().splitlines() or [""])[0]
-        out["reason"] = f"replay: {type(error).__name__}: {first}"[:500]
-    if out["reason"]:
-        out["reason"] = relative_to_run(out["reason"], run_dir)
-    out["seconds"] = round(time.perf_counter() - start, 3)
-    return out
+        row = row.replace(reason=f"replay: {type(error).__name__}: {first}"[:500])
+    if row.reason:
+        row = row.replace(reason=relative_to_run(row.reason, run_dir))
+    return row.replace(seconds=round(time.perf_counter() - start, 3))
 
 
 def replay_without_video(out: Dict[str, Any], video_error: str, record: EpisodeRecord, bank,
