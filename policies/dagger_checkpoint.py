@@ -8,7 +8,8 @@ After every iteration the run writes, into ``out/dagger_checkpoint/`` (all atomi
   data set after iteration ``k`` is ``iteration_1 .. iteration_k`` in order;
 - ``weights_<k>.pt``: the policy's parameters, Adam's state and torch's RNG state after
   iteration ``k``'s training (the previous iteration's file is removed once ``k`` is committed);
-- ``progress.json`` (written last: the commit): the run's identity (:func:`run_identity`), the
+- ``progress.json`` (written last: the commit): the run's identity (:func:`run_identity`: its settings, the code
+  it runs and the reference driver's fingerprint), the
   number ``k`` of finished iterations, their stats, the minibatch-order RNG's state, each
   training env's position (:meth:`policies.imitation.ReferenceLabels.snapshot`), the wall
   time spent so far and the earlier resumes.
@@ -21,7 +22,10 @@ steps (one during training loses the iteration's training, not its collection).
 A run killed at any point restarts from the last commit and ends with the same model as an
 uninterrupted one (the envs are put back where they were by replaying the current episode's
 actions). A checkpoint whose identity differs from the new call's is refused
-(:class:`~scenario_bank.run_identity.RunIdentityError`), never mixed in.
+(:class:`~scenario_bank.run_identity.RunIdentityError`), never mixed in: other settings, other code
+(:func:`~policies.run_identity.check_code_unchanged`: dv2s's sources, the plug-ins, the user's files the code read) or a
+reference driver replaced or edited since (:func:`~policies.run_identity.check_policy_unchanged`), whose labels would
+otherwise be mixed with the first one's.
 """
 
 from __future__ import annotations
@@ -36,8 +40,10 @@ from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional
 import numpy as np
 
 from policies.dagger_config import DaggerConfig
+from policies.run_identity import CODE_IDENTITY, check_code_unchanged, check_policy_unchanged, code_identity, \
+    resume_fingerprint
 from policies.training import TrainingError
-from scenario_bank.run_identity import bank_identity, check_format, check_identity, record_format
+from scenario_bank.run_identity import RunIdentityError, bank_identity, check_format, check_identity, record_format
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json, file_sha256
 from scenario_bank.bank import Bank
 from scenario_bank.run_paths import as_read, read_paths, record_paths, resume_fix
@@ -46,18 +52,22 @@ if TYPE_CHECKING:
     from policies.training import TrainConfig
 
 __all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "LabelledBatch", "SavedIteration", "PartialIteration",
-           "run_identity", "describe_position"]
+           "run_identity", "describe_position", "REFERENCE_FINGERPRINT"]
 
 CHECKPOINT_DIR = "dagger_checkpoint"
 """The checkpoint's folder inside the fine-tuning run's ``out``."""
 
 SCHEMA = "dv2s-dagger-checkpoint"
-VERSION = 2
+VERSION = 3
 """The format of ``progress.json`` (bumped when its fields change; a checkpoint of another format is refused)."""
 
 IDENTITY_ORDER = ("steps", "iterations", "epochs", "batch_size", "learning_rate", "beta", "beta_decay", "reference",
                   "seed", "n_envs", "weights", "env_config", "bank_dir", "source", "source_sha256", "scenario_hashes")
 """The order in which a refused checkpoint's settings are compared (the first difference is named)."""
+
+REFERENCE_FINGERPRINT = "reference_fingerprint"
+"""The key under which a checkpoint's identity records the reference driver's
+:func:`~policies.run_identity.resume_fingerprint`."""
 
 _DERIVED = {"source_sha256": " (the source checkpoint's file changed)",
             "scenario_hashes": " (the bank's scenario scripts changed)"}
@@ -149,9 +159,13 @@ def run_identity(*, source: str, source_checkpoint: Path, config: "TrainConfig",
     """The settings a checkpoint must share with a call to resume it (JSON-safe): everything that changes
     the result (the source checkpoint's bytes, the bank's scenario scripts, the sampling ``weights``, the
     ``env_config``, ``config``'s steps, seed and environments, every ``dagger`` setting but how often it
-    commits), not how it runs (``vec_env``, the progress bar)."""
+    commits), not how it runs (``vec_env``, the progress bar); and the code it runs
+    (:data:`~policies.run_identity.CODE_IDENTITY`, but the files under its ``out`` folder and its bank) and the
+    reference driver's fingerprint (:data:`REFERENCE_FINGERPRINT`)."""
     names, bank_dir, d = sorted(weights), config.bank_dir, dagger
+    own = [config.out, bank_dir]
     return json.loads(json.dumps({
+        CODE_IDENTITY: code_identity(exclude=own), REFERENCE_FINGERPRINT: resume_fingerprint(str(d.reference)),
         "source": str(source), "source_sha256": file_sha256(source_checkpoint),
         "bank_dir": None if bank_dir is None else str(Path(bank_dir).resolve()),
         "weights": {name: float(weights[name]) for name in names},
@@ -206,11 +220,14 @@ class DAggerCheckpoint:
         # paths in the fine-tuning's folder or the loop folder holding it, where they are now (a moved folder resumes)
         recorded = read_paths(data.get("identity") or {}, self.folder.parent)
         asked = as_read(self.identity, self.folder.parent)
-        keys = [key for key in IDENTITY_ORDER if key in recorded or key in asked]
-        check_identity(recorded, asked, keys + sorted((set(recorded) | set(asked)) - set(keys)),
+        settings = [{key: value for key, value in identity.items() if key not in _CHECKED_APART}
+                    for identity in (recorded, asked)]
+        keys = [key for key in IDENTITY_ORDER if key in settings[0] or key in settings[1]]
+        check_identity(settings[0], settings[1], keys + sorted((set(settings[0]) | set(settings[1])) - set(keys)),
                        run=f"{self.folder} holds an unfinished DAgger run", notes=_DERIVED,
                        fix=resume_fix(self.folder.parent, f"pass the same settings to resume it, or delete "
                                                           f"{self.folder} to start over"))
+        self._check_code(recorded, asked)
         iteration = int(data["iteration"])
         try:
             observations, labels, disagreed, next_observations = [], [], [], None
@@ -243,6 +260,17 @@ class DAggerCheckpoint:
                               history=list(data["history"]), envs=list(data["envs"]),
                               wall_time_s=float(data.get("wall_time_s", 0.0)), resumes=list(data.get("resumes", [])),
                               partial=partial, disagreed=disagreed)
+
+    def _check_code(self, recorded: Mapping[str, Any], asked: Mapping[str, Any]) -> None:
+        """Refuse a checkpoint made with other code or with a reference driver changed since (each fact named), as
+        every resumable run is refused (:mod:`policies.run_identity`); an identity with neither asks nothing."""
+        run = f"{self.folder} holds an unfinished DAgger run"
+        if CODE_IDENTITY in recorded or CODE_IDENTITY in asked:
+            check_code_unchanged(recorded, run=run, error=RunIdentityError, now=asked.get(CODE_IDENTITY) or {})
+        if REFERENCE_FINGERPRINT in recorded or REFERENCE_FINGERPRINT in asked:
+            check_policy_unchanged(recorded, str(asked.get("reference", recorded.get("reference"))),
+                                   folder=self.folder.parent, run="DAgger run", error=RunIdentityError,
+                                   key=REFERENCE_FINGERPRINT, role="reference driver")
 
     def save(self, batch: LabelledBatch, *, model: Any, optimizer: Any, rng: np.random.Generator,
              history: List[Dict[str, Any]], envs: List[Dict[str, Any]], wall_time_s: float,
@@ -290,6 +318,10 @@ class DAggerCheckpoint:
         """Delete the folder (the run is finished: its model and card are written)."""
         shutil.rmtree(self.folder, ignore_errors=True)
 
+
+_CHECKED_APART = (CODE_IDENTITY, REFERENCE_FINGERPRINT)
+"""The facts of a checkpoint's identity compared as recorded (a user's file hashed again, one the run did not read
+left out) by :meth:`DAggerCheckpoint._check_code`, not as settings."""
 
 _PROGRESS_FIELDS = {"identity": dict, "iteration": int, "history": list, "rng": dict, "envs": list}
 """What every ``progress.json`` holds (:meth:`DAggerCheckpoint.save` and ``save_partial`` write them all)."""

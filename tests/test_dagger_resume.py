@@ -214,7 +214,7 @@ def test_an_unreadable_checkpoint_is_refused_with_the_fix(tmp_path):
         dagger_fine_tune("dv2s-ppo", out=tmp_path / "run", log=lambda _: None, **RUN)
 
 
-_GOOD_PROGRESS = {"schema": "dv2s-dagger-checkpoint", "version": 2, "identity": {}, "iteration": 0,
+_GOOD_PROGRESS = {"schema": "dv2s-dagger-checkpoint", "version": 3, "identity": {}, "iteration": 0,
                   "history": [], "rng": {}, "envs": [], "partial": None}
 
 

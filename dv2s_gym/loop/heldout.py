@@ -22,7 +22,7 @@ import os
 import sys
 from pathlib import Path
 from tqdm import tqdm
-from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary", "episode_failed", "failure_types"]
 
@@ -36,6 +36,7 @@ from dv2s_gym.regress.stats import mcnemar_exact, PairedTable as Outcomes
 from policies.stats import Rate
 from dv2s_gym.workers.pool import LocalBackend
 from dv2s_gym.workers.settings import WorkerSettings
+from scenario_bank.read_files import ReadFile
 
 Episode = Tuple[str, int]
 
@@ -47,8 +48,10 @@ def episode_failed(record: HeldOutEpisode) -> Optional[bool]:
 class HeldOutStore:
     """The finished episodes of one evaluation, one JSON line each, keyed by (role, scenario, seed)."""
 
-    def __init__(self, path: os.PathLike | str) -> None:
+    def __init__(self, path: os.PathLike | str,
+                 on_reads: Optional[Callable[[Iterable[ReadFile]], None]] = None) -> None:
         self.path = Path(path)
+        self.on_reads = on_reads  # given the user's files the workers read so far, before each episode is saved
         self.records: Dict[Tuple[str, str, int], HeldOutEpisode] = {}
         # a line cut by a kill is left out: its episode runs again. An episode that errored is finished too (its
         # error is its outcome): running only the errored episodes again would give one policy a second draw on
@@ -58,8 +61,11 @@ class HeldOutStore:
             record = HeldOutEpisode.from_dict(row)
             self.records[(record.role, record.scenario, record.seed)] = record
 
-    def append(self, record: HeldOutEpisode) -> None:
-        """Save one finished episode (fsynced)."""
+    def append(self, record: HeldOutEpisode, reads: Iterable[ReadFile] = ()) -> None:
+        """Save one finished episode (fsynced), after giving ``on_reads`` the user's files read to run it and the
+        earlier ones (``reads``: by the workers; :attr:`dv2s_gym.workers.pool.LocalBackend.files_read`)."""
+        if self.on_reads is not None:
+            self.on_reads(reads)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         with open(self.path, "a", encoding="utf-8") as handle:
             row = record_paths(json.loads(json.dumps(record.to_dict(), default=str)), self.path.parent)
@@ -100,7 +106,8 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
         elif tasks:
             def finished(record: Any) -> None:  # a worker's HeldOutEpisode, or the JSON object of one it gave up on
                 store.append(record if isinstance(record, HeldOutEpisode)
-                             else HeldOutEpisode.from_dict({"policy": policy, **record}))
+                             else HeldOutEpisode.from_dict({"policy": policy, **record}),
+                             reads=list(backend.files_read.values()))
                 if bar is not None:
                     bar.update(1)
 

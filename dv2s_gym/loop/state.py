@@ -9,7 +9,7 @@ import dataclasses
 import json
 import re
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence
 
 from dv2s_gym.loop.measures import REFERENCE_DRIVER
 from dv2s_gym.loop.record import LoopStart, RecordedLoopSettings, RoundRecord, SplitRecord
@@ -20,7 +20,8 @@ from scenario_bank.records import RecordError
 from scenario_bank.run_identity import check_format, check_identity, check_run_kind, record_format
 from policies.registry import SB3_ALGORITHMS
 from policies.run_identity import (CODE_IDENTITY, check_code_unchanged, check_policy_unchanged, code_identity,
-                                   resume_fingerprint)
+                                   resume_fingerprint, run_read_facts, with_recorded_reads)
+from scenario_bank.read_files import ReadFile
 
 __all__ = ["IDENTITY", "HOLDOUT_BY", "REFERENCE_FINGERPRINT", "STATE_SCHEMA", "STATE_VERSION", "IN_FOLDER",
            "STAGE_NAMES", "LoopState", "round_spec", "working_bank", "RunningLoop", "earlier_round_spec", "lineage",
@@ -59,6 +60,7 @@ class LoopState:
 
     def __init__(self, path: Path, settings: Dict[str, Any]) -> None:
         self.path = path
+        self.exclude = [path.parent, settings.get("bank_dir")]  # the loop's own files are no code it runs
         check_run_kind(path.parent, STATE_SCHEMA, error=LoopError)
         if path.is_file():
             try:
@@ -81,7 +83,7 @@ class LoopState:
         else:
             data = {**record_format(STATE_SCHEMA, STATE_VERSION), "settings": settings, "start": None, "rounds": [],
                     REFERENCE_FINGERPRINT: resume_fingerprint(REFERENCE_DRIVER),
-                    CODE_IDENTITY: code_identity(exclude=[path.parent, settings.get("bank_dir")])}
+                    CODE_IDENTITY: code_identity(exclude=self.exclude)}
         self.rounds: List[RoundRecord] = _read_rounds(data.pop("rounds"), path)
         self.settings: RecordedLoopSettings = _read_part(RecordedLoopSettings, data.pop("settings"), path)
         start = data.pop("start", None)
@@ -97,6 +99,26 @@ class LoopState:
         atomic_write_json(self.path, {**self.extra, "settings": self.settings.to_dict(), "start": start,
                                       "rounds": rounds}, indent=1)
 
+    def add_reads(self, reads: Iterable[ReadFile] = (), records: Iterable[Path] = ()) -> bool:
+        """Add to the loop's code identity the user's files the code read (checked unchanged when the loop resumes):
+        those this process read, ``reads`` (read by a pool's workers) and those a run of a step recorded in its
+        own record (``records``: a mining run's ``settings.json``, a regression run's ``run.json``), but the loop's
+        own files; ``True`` when one was new (written by the next :meth:`save`)."""
+        identity = dict(self.extra.get(CODE_IDENTITY) or {})
+        merged = {**identity, **{key: value for key, value in run_read_facts(self.exclude, reads,
+                                                                             covered=identity).items()
+                                 if key not in identity}}
+        for record in records:
+            merged = with_recorded_reads(_recorded_code(Path(record)), merged)
+        self.extra[CODE_IDENTITY] = merged
+        return merged != identity
+
+    def record_reads(self, reads: Iterable[ReadFile] = ()) -> None:
+        """:meth:`add_reads` of this process and of ``reads``, written to ``loop.json`` at once when one is new
+        (before the episode whose workers read it is saved)."""
+        if self.add_reads(reads):
+            self.save()
+
     def round(self, number: int) -> RoundRecord:
         """Round ``number``'s record (the rounds before it started when not yet)."""
         while len(self.rounds) < number:
@@ -110,6 +132,16 @@ class LoopState:
         if save:
             self.save()
         return record
+
+
+def _recorded_code(record: Path) -> Dict[str, Any]:
+    """The code identity a run's record holds (a mining run's ``settings.json`` at its top, a regression run's
+    ``run.json`` in its settings); empty when there is no such file (a step that ran no such run)."""
+    if not record.is_file():
+        return {}
+    data = json.loads(record.read_text(encoding="utf-8"))
+    holder = data if CODE_IDENTITY in data else data.get("settings") or {}
+    return dict(holder.get(CODE_IDENTITY) or {})
 
 
 def _in_folder(value: Any, folder: Path, write: bool) -> Any:

@@ -24,6 +24,8 @@ from dv2s_gym.loop.report import errored_note, errored_text, rate_text, referenc
 from dv2s_gym.loop.split import family_of, split_by_family
 from dv2s_gym.loop.state import STAGE_NAMES, RunningLoop, earlier_sides, lineage, round_spec
 from dv2s_gym.mining.miner import MineSettings, RunOrigin
+from dv2s_gym.mining.settings import SETTINGS_FILE
+from dv2s_gym.regress.store import RUN_FILE
 from dv2s_gym.workers.settings import WorkerSettings
 from policies.evaluation import EVAL_SEED_BASE
 
@@ -48,6 +50,8 @@ class Timed:
         began = time.perf_counter()
         value = function()
         seconds = round(time.perf_counter() - began, 1)  # of the run that finished the step
+        # the files the step's code read join loop.json in the same write that marks the step done
+        state.add_reads(records=_step_records(self.loop.out / f"round_{self.number}", step))
         state.update(state.round(self.number).with_step(step, value, seconds))
         log(f"{where}: done in {seconds:.0f} s")
         return value
@@ -56,6 +60,14 @@ class Timed:
     def steps(self) -> RoundSteps:
         """The round's steps as recorded so far."""
         return self.loop.state.round(self.number).steps
+
+
+def _step_records(round_dir: Path, step: str) -> List[Path]:
+    """The records of the runs a step made, each holding the user's files its workers read: the mining run's
+    ``settings.json``, the regression runs' ``run.json``."""
+    runs = {"mine": [round_dir / "mine" / SETTINGS_FILE], "regress": [round_dir / "regress" / RUN_FILE],
+            "untouched": [round_dir / "untouched" / side / RUN_FILE for side in ("vs_start", "vs_control")]}
+    return runs.get(step, [])
 
 
 def mine_step(loop: RunningLoop, number: int, current: str, round_dir: Path) -> MiningSummary:
@@ -156,8 +168,12 @@ def tune_and_measure(loop: RunningLoop, number: int, current: str, round_dir: Pa
     episodes = [(name, EVAL_SEED_BASE + i) for name in split.held_out_scenarios for i in range(s.k_eval)]
     families = _families_of(timed.steps.mine.kept_entries, split.held_out_scenarios, loop.bank)
     store_path = round_dir / "heldout.jsonl"
+
+    def held_out() -> HeldOutStore:  # what its workers read joins loop.json before each episode is saved
+        return HeldOutStore(store_path, on_reads=loop.state.record_reads)
+
     if not timed.steps.done("reference"):
-        gate = timed("reference", lambda: _reference_step(loop, episodes, HeldOutStore(store_path), families),
+        gate = timed("reference", lambda: _reference_step(loop, episodes, held_out(), families),
                      f"{len(episodes)} episodes ({len(split.held_out_scenarios)} held-out scenario(s) x {s.k_eval} seeds) "
                      f"for the reference driver {REFERENCE_DRIVER}: a held-out episode it does not pass is left out")
         _log_reference(loop, number, gate)
@@ -169,7 +185,7 @@ def tune_and_measure(loop: RunningLoop, number: int, current: str, round_dir: Pa
         loop.log(f"round {number}: WARNING: {shortfall}")
     if not timed.steps.done("before"):
         def before_step() -> HeldOutBefore:
-            records = heldout.evaluate_heldout("before", current, episodes, store=HeldOutStore(store_path),
+            records = heldout.evaluate_heldout("before", current, episodes, store=held_out(),
                                                bank_dir=loop.bank, env_config=loop.env_config,
                                                workers=WorkerSettings(workers=loop.workers), progress=loop.progress)
             return HeldOutBefore(episodes=len(episodes), done=bool(records), errored=errored_episodes(records))
@@ -182,7 +198,7 @@ def tune_and_measure(loop: RunningLoop, number: int, current: str, round_dir: Pa
     new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
     policies = {"before": current, "after": new_policy, "control": control_policy}
     if not timed.steps.done("after"):
-        after = timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families),
+        after = timed("after", lambda: _after_step(loop, policies, episodes, held_out(), families),
                       f"{len(episodes)} episodes for the fine-tuned policy" + (" and as many for the control"
                                                                                if control_policy else ""))
         log_errored(loop, number, "held-out: fine-tuned and control", after.errored or {})
