@@ -188,7 +188,7 @@ def test_a_run_against_a_baseline_report_repeats_its_seed_env_config_and_failure
     from dv2s_gym.regress.report import baseline_defaults
 
     path = tmp_path / "report.json"
-    path.write_text(json.dumps({"schema": "dv2s-regress", "schema_version": 3,
+    path.write_text(json.dumps({"schema": "dv2s-regress", "schema_version": 4,
                                 "settings": {"seed": 7, "env_config": {"duration": 4}, "failure": ["collision", "stall"]}}))
     kinds = ["collision", "stall"]
     assert baseline_defaults(path, None, None) == (7, {"duration": 4}, kinds)

@@ -4,17 +4,19 @@
 :mod:`dv2s_gym.regress.records`, read by attribute); its ``to_json()`` is the JSON object below, key for key and in
 this order, and :func:`load_report` reads a ``report.json`` back into one.
 
-JSON schema ``dv2s-regress``, version 3 (:data:`SCHEMA_VERSION`; a change to any key below
-bumps it, and ``--baseline-report`` refuses a report of another version)::
+JSON schema ``dv2s-regress``, version 4 (:data:`SCHEMA_VERSION`; a change to any key below
+bumps it, and ``--baseline-report`` refuses a report of another version: version 3 did not record the
+``"files read by detectors"``, so a version 3 baseline cannot say which files decided its failure kinds)::
 
     {
-      "schema": "dv2s-regress", "schema_version": 3,
+      "schema": "dv2s-regress", "schema_version": 4,
       "created": ISO-8601 time (UTC), "dv2s_version": "0.1.0",
       "code_identity": {"dv2s sources (SHA-256)", "plug-in modules": {module: SHA-256 of its source},
                         "detectors": {kind: {"failure type": module, "detector": module,
                                              "sources (SHA-256)": {module: SHA-256}}},
                         "replaced built-ins": [phrases],
-                        "files read by detectors": {kind: {"user file limits.json (SHA-256)": SHA-256, ...}}}
+                        "files read by detectors": {kind: {"user file limits.json read by myfail (SHA-256)":
+                                                             SHA-256, ...}}}
                                                    the code that judged the episodes,
       "bank": {"path": bank folder, "version": SHA-256 over the scenarios used (name + script),
                "scenarios": [names], "hashes": {name: SHA-256 of its script}},
@@ -132,7 +134,7 @@ __all__ = [
     "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings"]
 
 SCHEMA = "dv2s-regress"
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """The format of ``report.json`` (bumped when its fields change; a report of another version is refused)."""
 CONFIDENCE = 0.95
 
