@@ -197,3 +197,23 @@ def test_a_run_against_a_baseline_report_repeats_its_seed_env_config_and_failure
     assert baseline_defaults(path, 2, {}, "off_road") == (2, {}, "off_road")
     # all given: the report is not read (a missing one is refused later, by the run itself)
     assert baseline_defaults(tmp_path / "missing.json", 1, {}, "collision") == (1, {}, "collision")
+
+
+def test_unknown_kinds_taken_from_a_baseline_report_name_the_report_its_plugins_and_the_fix(tmp_path, capsys):
+    path = tmp_path / "report.json"
+    judged = {kind: {"failure type": module, "detector": module, "sources (SHA-256)": {module: "a" * 64}}
+              for kind, module in (("speeding", "myfail"), ("speeding2", "myfail2"))}
+    path.write_text(json.dumps({"schema": "dv2s-regress", "schema_version": 4,
+                                "code_identity": {"detectors": judged},
+                                "settings": {"seed": 0, "env_config": {}, "failure": ["speeding", "speeding2"]}}))
+    assert main(["regress", "--policy", "idm", "--baseline-report", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--failure:" not in err
+    assert (f"baseline report {path} was judged on failure kinds speeding, speeding2, unknown here (speeding: "
+            "plug-in module myfail; speeding2: plug-in module myfail2); load them with DV2S_PLUGINS=myfail,myfail2, "
+            "or pass --failure with kinds this run knows (collision, off_road, stall") in err
+    assert not (tmp_path / "out").exists()
+    # a --failure the user typed is the user's: an unknown one is still named as the option's
+    assert main(["regress", "--policy", "idm", "--baseline-report", str(path), "--failure", "speeding",
+                 "--out", str(tmp_path / "out")]) == 2
+    assert "--failure: unknown failure kind 'speeding'" in capsys.readouterr().err
