@@ -62,7 +62,8 @@ from scenario_bank.failure_types import plugin_table
 from scenario_bank.named_registry import replaced_built_ins
 from scenario_bank.plugins import MAIN, code_modules
 from scenario_bank.read_files import (ReadFile, ReadFilesError, changed_while_running, detector_label,
-                                      labelled_module, plugin_label, python_path_folders, user_reads, watch)
+                                      labelled_module, plugin_label, python_path_folders, unwatched, user_reads,
+                                      watch)
 from scenario_bank.run_paths import resume_fix
 
 __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "check_policy_unchanged",
@@ -70,6 +71,13 @@ __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "c
            "code_identity", "check_code_unchanged", "module_fingerprint", "detector_identity",
            "report_code_identity", "BUILT_IN", "read_facts", "run_read_facts", "with_recorded_reads",
            "DETECTOR_READS", "detector_reads", "changed_files", "ReadsRecorder"]
+
+
+def _hash(path: Path) -> str:
+    """The file's SHA-256, read without its being noted as a file the code read (it is dv2s's check)."""
+    with unwatched():
+        return file_sha256(path)
+
 
 MAX_HELPER_FILES = 500
 """At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
@@ -176,19 +184,19 @@ def resume_fingerprint(spec: str) -> Dict[str, Any]:
                              "dv2s version": installed_version()}
     for key, value in sorted(options.items()):
         if isinstance(value, str) and value and Path(value).is_file():
-            facts[f"option {key} file {value} (SHA-256)"] = file_sha256(Path(value))
+            facts[f"option {key} file {value} (SHA-256)"] = _hash(Path(value))
     checkpoint = checkpoint_path(base)
     if checkpoint is not None:
         resolved = checkpoint.resolve()
-        facts[f"checkpoint {checkpoint} (SHA-256)"] = file_sha256(resolved) if resolved.is_file() else "missing"
+        facts[f"checkpoint {checkpoint} (SHA-256)"] = _hash(resolved) if resolved.is_file() else "missing"
         card = resolved.parent / "model_card.json"
         if card.is_file():
-            facts[f"model card {card} (SHA-256)"] = file_sha256(card)
+            facts[f"model card {card} (SHA-256)"] = _hash(card)
     elif base in registered_policies():
         module = registered_policy_module(base)
         found = _module_file(module) if module else None
         if found is not None:
-            facts[f"module {module} source (SHA-256)"] = file_sha256(found)
+            facts[f"module {module} source (SHA-256)"] = _hash(found)
     elif ":" in base:
         facts.update(module_fingerprint(base.partition(":")[0]))
     return facts
@@ -198,11 +206,11 @@ def module_fingerprint(module: str) -> Dict[str, str]:
     """The SHA-256 of a user's module's source file and of its helper files (module docstring), ``{description:
     SHA-256}`` (``"not found"`` for a module with no source file)."""
     found = _module_file(module)
-    facts = {f"module {module} source (SHA-256)": file_sha256(found) if found else "not found"}
+    facts = {f"module {module} source (SHA-256)": _hash(found) if found else "not found"}
     if found is not None:
         for helper in _helper_files(found, module):
             if helper != found.resolve():
-                facts[f"module file {_file_label(helper, module, 'beside')} (SHA-256)"] = file_sha256(helper)
+                facts[f"module file {_file_label(helper, module, 'beside')} (SHA-256)"] = _hash(helper)
     return facts
 
 
@@ -347,7 +355,7 @@ def _as_recorded(recorded: Mapping[str, Any], now: Mapping[str, Any]) -> Dict[st
     for key in recorded:
         if _USER_FILE.match(key) and key not in now:
             path = _found_file(key)
-            facts[key] = file_sha256(path) if path is not None else "missing"
+            facts[key] = _hash(path) if path is not None else "missing"
     return facts
 
 
@@ -408,7 +416,7 @@ def dv2s_sources_sha256() -> str:
                 continue
             if any(folder in path.parents for folder in skipped):
                 continue
-            digest.update(str(path.relative_to(_DV2S_ROOT)).encode() + b"\0" + file_sha256(path).encode() + b"\n")
+            digest.update(str(path.relative_to(_DV2S_ROOT)).encode() + b"\0" + _hash(path).encode() + b"\n")
     return digest.hexdigest()
 
 
@@ -514,7 +522,7 @@ BUILT_IN = "dv2s-gym's own"
 
 def _source_sha256(module: str) -> str:
     found = _module_file(module)
-    return file_sha256(found) if found is not None else "not found"
+    return _hash(found) if found is not None else "not found"
 
 
 def detector_identity(kinds: Iterable[str]) -> Dict[str, Dict[str, Any]]:
@@ -572,7 +580,7 @@ def changed_files(facts: Mapping[str, str]) -> List[str]:
     changed = []
     for key, recorded in sorted(facts.items()):
         path = _found_file(key)
-        now = file_sha256(path) if path is not None else "missing"
+        now = _hash(path) if path is not None else "missing"
         if now != recorded:
             changed.append(f"{key}: recorded {str(recorded)[:12]}, now {now[:12]}")
     return changed

@@ -32,7 +32,7 @@ from scenario_bank.cache import cache_dir
 from scenario_bank.errors import DV2SError
 
 __all__ = ["ReadFile", "ReadFilesError", "watch", "reading_for", "user_reads", "unsent_reads", "detector_label",
-           "plugin_label", "labelled_module", "changed_while_running", "DV2S_ROOT", "DV2S_PACKAGES", "python_roots", "python_path_folders", "SYSTEM_FOLDERS"]
+           "plugin_label", "labelled_module", "unwatched", "changed_while_running", "DV2S_ROOT", "DV2S_PACKAGES", "python_roots", "python_path_folders", "SYSTEM_FOLDERS"]
 
 DV2S_ROOT = Path(__file__).resolve().parents[1]
 """The folder holding dv2s-gym's four packages."""
@@ -76,8 +76,11 @@ _sent: Dict[str, Tuple[str, Tuple[str, ...]]] = {}  # path -> (SHA-256, labels) 
 _user_path: Dict[str, Optional[Path]] = {}  # a file's name as read -> its resolved path when the user's, else None
 
 
+_quiet = [0]  # > 0 inside unwatched(): a file hashed for a run's identity is not a file the code read
+
+
 def _hook(event: str, args: tuple) -> None:
-    if event != "open":
+    if event != "open" or _quiet[0]:
         return
     try:
         path, mode, flags = args
@@ -107,6 +110,17 @@ def watch() -> None:
     if not _installed:
         sys.addaudithook(_hook)
         _installed = True
+
+
+@contextmanager
+def unwatched() -> Iterator[None]:
+    """Files opened inside the block are not noted: dv2s hashing a file to record or check it is not the code
+    reading it (a check of a recorded ``limits.json`` would otherwise make it a file read outside any plug-in)."""
+    _quiet[0] += 1
+    try:
+        yield
+    finally:
+        _quiet[0] -= 1
 
 
 def detector_label(kind: str) -> str:
@@ -206,7 +220,8 @@ def _sha256(path: Path) -> Optional[str]:
         return known[2]
     if not path.is_file():
         return None
-    digest = file_sha256(path)
+    with unwatched():
+        digest = file_sha256(path)
     _hashes[key] = (stat.st_mtime_ns, stat.st_size, digest)
     return digest
 

@@ -136,7 +136,7 @@ def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, m
     (tmp_path / "weights.json").write_text('{"w": 2}')  # the data file an option names changed
     after = resume_fingerprint(spec)
     changed = sorted(key for key in before.keys() | after.keys() if before.get(key) != after.get(key))
-    assert changed == ["module file stealth_cfg.py (SHA-256)",  # named relative to the working folder holding it
+    assert changed == ["module file stealth_cfg.py beside helped_policy_here (SHA-256)",  # beside the policy module
                        "option weights file weights.json (SHA-256)"]
     from policies import run_identity
 
