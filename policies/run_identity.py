@@ -35,8 +35,8 @@ holding it with the Python path keeps its name: a module by its module name; a f
 it was imported or its detector ran), or a ``.py`` file beside a fingerprinted module, by its path relative to that
 module's folder and the module's name (``user file limits.json read by myfail``: two plug-ins' ``limits.json`` are
 two names, each found again beside its own module); another file by its path relative to the nearest folder on the
-Python path (or the working folder) holding it, by its absolute path only outside them all. Two different files
-under one name are refused when recorded, and a recorded file whose SHA-256 a worker reports changed stops the run
+Python path (or the working folder) holding it, by its absolute path outside them all or when two files read would
+have one name. Two different SHA-256 under one name are refused when recorded, and a recorded file whose SHA-256 a worker reports changed stops the run
 (:class:`~scenario_bank.read_files.ReadFilesError`).
 A report of ``dv2s regress`` records, per failure kind it judged, the files that kind's plug-in read
 (:func:`detector_reads`), which ``--baseline-report`` compares with the files here (:func:`changed_files`).
@@ -316,10 +316,16 @@ def read_facts(reads: Iterable[ReadFile], covered: Iterable[str] = ()) -> Dict[s
     """
     seen = {path for path in (_covered_file(key) for key in covered) if path is not None}
     detectors = plugin_table()["detectors"]
+    keyed = [(read, _read_key(read, detectors)) for read in sorted(reads, key=lambda r: r.path)
+             if Path(read.path) not in seen]
+    paths: Dict[str, set] = {}
+    for read, key in keyed:
+        paths.setdefault(key, set()).add(read.path)
     facts: Dict[str, str] = {}
-    for read in sorted(reads, key=lambda r: r.path):
-        if Path(read.path) not in seen:
-            _add_fact(facts, _read_key(read, detectors), read.sha256, read.path)
+    for read, key in keyed:
+        if len(paths[key]) > 1:  # two files one relative name would give (read outside any plug-in): their paths
+            key = f"user file {Path(read.path).resolve()} (SHA-256)"
+        _add_fact(facts, key, read.sha256, read.path)
     return facts
 
 

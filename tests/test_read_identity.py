@@ -304,10 +304,13 @@ def test_a_plugins_data_file_is_named_beside_the_module_that_read_it_and_found_t
     (tmp_path / "b" / "limits.json").write_text("{}", encoding="utf-8")
     assert [line.partition(":")[0] for line in run_identity.changed_files(facts)] == [
         "user file limits.json read by reader_b (SHA-256)"]
-    unlabelled = [read_files.ReadFile(read.path, None, read.sha256, ()) for read in reads]
+    unlabelled = [read_files.ReadFile(read.path, None, read.sha256, ()) for read in reads]  # read by no plug-in
+    assert run_identity.read_facts(unlabelled) == {f"user file {Path(read.path).resolve()} (SHA-256)": read.sha256
+                                                   for read in reads}  # one relative name for both: their paths
     with pytest.raises(read_files.ReadFilesError, match=r"two different files the code read would be recorded as "
-                                                        r"'user file limits\.json \(SHA-256\)'"):
-        run_identity.read_facts(unlabelled)
+                                                        r"'user module reader_a \(SHA-256\)'"):
+        run_identity.read_facts([read_files.ReadFile(str((tmp_path / "a" / "reader_a.py").resolve()), "reader_a",
+                                                     digest * 64, ()) for digest in "01"])
 
 
 def test_a_file_whose_sha256_changes_while_a_pool_runs_stops_it_naming_the_file_and_both_hashes(tmp_path):

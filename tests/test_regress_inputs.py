@@ -153,7 +153,7 @@ def test_resume_is_refused_when_a_helper_module_of_the_policy_changed(tmp_path, 
                      progress=False)
     run_regression("helped_policy_there:make", "rule", **arguments)
     (tmp_path / "stealth_cfg2.py").write_text("ACTION = 4\n")
-    with pytest.raises(ResumeMismatchError, match=r"stealth_cfg2\.py \(SHA-256\)"):
+    with pytest.raises(ResumeMismatchError, match=r"stealth_cfg2\.py beside helped_policy_there \(SHA-256\)"):
         run_regression("helped_policy_there:make", "rule", **arguments)
 
 
