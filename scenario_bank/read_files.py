@@ -56,7 +56,7 @@ class ReadFile:
 
 class ReadFilesError(DV2SError, ValueError):
     """The user's files a run read cannot stand for what it did: one changed while the run ran (its episodes would
-    mix two versions of it), or two different files would be recorded under one name."""
+    mix two versions of it), or two different SHA-256 would be recorded under one file's name."""
 
 
 def changed_while_running(path: str, recorded: str, now: str) -> ReadFilesError:
