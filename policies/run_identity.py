@@ -31,8 +31,13 @@ with the fingerprints of their source (as a ``module:attribute`` policy's), what
 detector name -> module), the built-in entries they replaced, and the user's files the code read
 (:mod:`scenario_bank.read_files`: modules imported and data files opened, in this process and, added as the run goes
 by :class:`ReadsRecorder`, in its workers; :func:`read_facts`). A user's file is named so that moving the folder
-holding it with the Python path keeps its name: a module by its module name, a file by its path relative to the
-nearest folder on the Python path (or the working folder) holding it, by its absolute path only outside them all.
+holding it with the Python path keeps its name: a module by its module name; a file a plug-in module read (while
+it was imported or its detector ran), or a ``.py`` file beside a fingerprinted module, by its path relative to that
+module's folder and the module's name (``user file limits.json read by myfail``: two plug-ins' ``limits.json`` are
+two names, each found again beside its own module); another file by its path relative to the nearest folder on the
+Python path (or the working folder) holding it, by its absolute path outside them all or when two files read would
+have one name. Two different SHA-256 under one name are refused when recorded, and a recorded file whose SHA-256 a worker reports changed stops the run
+(:class:`~scenario_bank.read_files.ReadFilesError`).
 A report of ``dv2s regress`` records, per failure kind it judged, the files that kind's plug-in read
 (:func:`detector_reads`), which ``--baseline-report`` compares with the files here (:func:`changed_files`).
 """
@@ -42,6 +47,7 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import json
+import os
 import re
 import sys
 import sysconfig
@@ -55,7 +61,9 @@ from scenario_bank.atomic import atomic_write_json, file_sha256
 from scenario_bank.failure_types import plugin_table
 from scenario_bank.named_registry import replaced_built_ins
 from scenario_bank.plugins import MAIN, code_modules
-from scenario_bank.read_files import ReadFile, detector_label, plugin_label, python_path_folders, user_reads, watch
+from scenario_bank.read_files import (ReadFile, ReadFilesError, changed_while_running, detector_label,
+                                      labelled_module, plugin_label, python_path_folders, unwatched, user_reads,
+                                      watch)
 from scenario_bank.run_paths import resume_fix
 
 __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "check_policy_unchanged",
@@ -63,6 +71,13 @@ __all__ = ["RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes", "c
            "code_identity", "check_code_unchanged", "module_fingerprint", "detector_identity",
            "report_code_identity", "BUILT_IN", "read_facts", "run_read_facts", "with_recorded_reads",
            "DETECTOR_READS", "detector_reads", "changed_files", "ReadsRecorder"]
+
+
+def _hash(path: Path) -> str:
+    """The file's SHA-256, read without its being noted as a file the code read (it is dv2s's check)."""
+    with unwatched():
+        return file_sha256(path)
+
 
 MAX_HELPER_FILES = 500
 """At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
@@ -169,19 +184,19 @@ def resume_fingerprint(spec: str) -> Dict[str, Any]:
                              "dv2s version": installed_version()}
     for key, value in sorted(options.items()):
         if isinstance(value, str) and value and Path(value).is_file():
-            facts[f"option {key} file {value} (SHA-256)"] = file_sha256(Path(value))
+            facts[f"option {key} file {value} (SHA-256)"] = _hash(Path(value))
     checkpoint = checkpoint_path(base)
     if checkpoint is not None:
         resolved = checkpoint.resolve()
-        facts[f"checkpoint {checkpoint} (SHA-256)"] = file_sha256(resolved) if resolved.is_file() else "missing"
+        facts[f"checkpoint {checkpoint} (SHA-256)"] = _hash(resolved) if resolved.is_file() else "missing"
         card = resolved.parent / "model_card.json"
         if card.is_file():
-            facts[f"model card {card} (SHA-256)"] = file_sha256(card)
+            facts[f"model card {card} (SHA-256)"] = _hash(card)
     elif base in registered_policies():
         module = registered_policy_module(base)
         found = _module_file(module) if module else None
         if found is not None:
-            facts[f"module {module} source (SHA-256)"] = file_sha256(found)
+            facts[f"module {module} source (SHA-256)"] = _hash(found)
     elif ":" in base:
         facts.update(module_fingerprint(base.partition(":")[0]))
     return facts
@@ -191,11 +206,11 @@ def module_fingerprint(module: str) -> Dict[str, str]:
     """The SHA-256 of a user's module's source file and of its helper files (module docstring), ``{description:
     SHA-256}`` (``"not found"`` for a module with no source file)."""
     found = _module_file(module)
-    facts = {f"module {module} source (SHA-256)": file_sha256(found) if found else "not found"}
+    facts = {f"module {module} source (SHA-256)": _hash(found) if found else "not found"}
     if found is not None:
         for helper in _helper_files(found, module):
             if helper != found.resolve():
-                facts[f"module file {_file_label(helper)} (SHA-256)"] = file_sha256(helper)
+                facts[f"module file {_file_label(helper, module, 'beside')} (SHA-256)"] = _hash(helper)
     return facts
 
 
@@ -205,14 +220,21 @@ def _search_folders() -> List[Path]:
     return python_path_folders() + [Path.cwd().resolve()]
 
 
-def _file_label(path: Path) -> str:
-    """How a user's file is named in an identity: relative to the nearest :func:`_search_folders` folder holding it
-    (the same name after the folder holding the plug-ins moves, with the Python path), else by its absolute path."""
+def _file_label(path: Path, anchor: Optional[str] = None, word: str = "read by") -> str:
+    """How a user's file is named in an identity (module docstring). With an ``anchor`` module (the plug-in that read
+    it, the module a helper file is beside) found by its name on the Python path, and the file in the same Python
+    path folder: ``"<path relative to the module's folder> <word> <module>"``, so that two plug-ins' ``limits.json``
+    are two names. Else relative to the nearest :func:`_search_folders` folder holding it, else its absolute path.
+    Either way the name stays when the folder holding the plug-ins moves, with the Python path."""
     path = Path(path).resolve()
     holding = [folder for folder in _search_folders() if folder in path.parents]
     if not holding:
         return str(path)
-    return path.relative_to(max(holding, key=lambda folder: len(folder.parts))).as_posix()  # the nearest one
+    nearest = max(holding, key=lambda folder: len(folder.parts))
+    module = _module_by_name(anchor) if anchor and anchor != MAIN else None
+    if module is not None and nearest in module.parents:
+        return f"{Path(os.path.relpath(path, module.parent)).as_posix()} {word} {anchor}"
+    return path.relative_to(nearest).as_posix()
 
 
 def _module_by_name(name: str) -> Optional[Path]:
@@ -235,10 +257,18 @@ def _found_file(key: str) -> Optional[Path]:
     label = match["path"]
     if match["kind"] == "user module":
         return _module_by_name(label)
+    anchored = _ANCHORED.match(label)
+    if anchored is not None:  # relative to the folder of the module that read it (or that it is beside)
+        module = _module_by_name(anchored["anchor"])
+        found = (module.parent / anchored["path"]).resolve() if module is not None else None
+        return found if found is not None and found.is_file() else None
     if Path(label).is_absolute():
         return Path(label) if Path(label).is_file() else None
     return next((folder / label for folder in _search_folders() if (folder / label).is_file()), None)
 
+
+_ANCHORED = re.compile(r"^(?P<path>.+) (?:read by|beside) (?P<anchor>[A-Za-z_][\w.]*)$")
+"""A user file's name relative to a module's folder (:func:`_file_label`)."""
 
 _MODULE_SOURCE = re.compile(r"^module (?P<name>\S+) source \(SHA-256\)$")
 
@@ -253,22 +283,50 @@ def _covered_file(key: str) -> Optional[Path]:
     return found.resolve() if found is not None else None
 
 
-def _read_key(read: ReadFile) -> str:
+def _read_key(read: ReadFile, detectors: Mapping[str, str]) -> str:
     """The fact naming a file a run read: ``user module <name>`` for a module found by its name, else ``user file
-    <path>`` (:func:`_file_label`)."""
+    <path>`` (:func:`_file_label`, relative to the folder of the plug-in module that read it when one did:
+    ``detectors``, failure kind -> module, names a detector's)."""
     if read.module and read.module != MAIN and _module_by_name(read.module) == Path(read.path):
         return f"user module {read.module} (SHA-256)"
-    return f"user file {_file_label(Path(read.path))} (SHA-256)"
+    readers = {labelled_module(label, dict(detectors)) for label in read.labels} - {None, MAIN}
+    return f"user file {_file_label(Path(read.path), min(readers) if readers else None)} (SHA-256)"
+
+
+def _add_fact(facts: Dict[str, Any], key: str, value: Any, path: Any = None) -> None:
+    """``facts[key] = value``, refusing a second, different value under one name (two files named alike)."""
+    if key in facts and facts[key] != value:
+        raise ReadFilesError(
+            f"two different files the code read would be recorded as {key!r} (SHA-256 {str(facts[key])[:12]} and "
+            f"{str(value)[:12]}{f', the second {path}' if path else ''}), so a resume could check only one; give "
+            "them distinct names or folders on the Python path")
+    facts[key] = value
 
 
 def read_facts(reads: Iterable[ReadFile], covered: Iterable[str] = ()) -> Dict[str, str]:
     """``{fact: SHA-256}`` of the user's files a run read (:func:`scenario_bank.read_files.user_reads`), each named
     so that moving the folder holding it (with the Python path) keeps its name: a module by its name
-    (``user module myplugins.helper``), a data file by its path relative to the Python path's folder holding it
-    (``user file limits.json``), else by its absolute path. A file the facts ``covered`` already name is left out."""
+    (``user module myplugins.helper``), a data file a plug-in read by its path relative to that plug-in module's
+    folder (``user file limits.json read by myfail``), another by its path relative to the Python path's folder
+    holding it (``user file limits.json``), else by its absolute path. A file the facts ``covered`` already name is
+    left out.
+
+    Raises:
+        ReadFilesError: two files with different bytes would have one name.
+    """
     seen = {path for path in (_covered_file(key) for key in covered) if path is not None}
-    return {_read_key(read): read.sha256 for read in sorted(reads, key=lambda r: r.path)
-            if Path(read.path) not in seen}
+    detectors = plugin_table()["detectors"]
+    keyed = [(read, _read_key(read, detectors)) for read in sorted(reads, key=lambda r: r.path)
+             if Path(read.path) not in seen]
+    paths: Dict[str, set] = {}
+    for read, key in keyed:
+        paths.setdefault(key, set()).add(read.path)
+    facts: Dict[str, str] = {}
+    for read, key in keyed:
+        if len(paths[key]) > 1:  # two files one relative name would give (read outside any plug-in): their paths
+            key = f"user file {Path(read.path).resolve()} (SHA-256)"
+        _add_fact(facts, key, read.sha256, read.path)
+    return facts
 
 
 def with_recorded_reads(recorded: Mapping[str, Any], now: Mapping[str, Any]) -> Dict[str, Any]:
@@ -303,7 +361,7 @@ def _as_recorded(recorded: Mapping[str, Any], now: Mapping[str, Any]) -> Dict[st
     for key in recorded:
         if _USER_FILE.match(key) and key not in now:
             path = _found_file(key)
-            facts[key] = file_sha256(path) if path is not None else "missing"
+            facts[key] = _hash(path) if path is not None else "missing"
     return facts
 
 
@@ -364,7 +422,7 @@ def dv2s_sources_sha256() -> str:
                 continue
             if any(folder in path.parents for folder in skipped):
                 continue
-            digest.update(str(path.relative_to(_DV2S_ROOT)).encode() + b"\0" + file_sha256(path).encode() + b"\n")
+            digest.update(str(path.relative_to(_DV2S_ROOT)).encode() + b"\0" + _hash(path).encode() + b"\n")
     return digest.hexdigest()
 
 
@@ -380,10 +438,12 @@ def code_identity(exclude: Iterable[Any] = (), reads: Iterable[ReadFile] = ()) -
     modules = code_modules()
     facts: Dict[str, Any] = {"dv2s sources (SHA-256)": dv2s_sources_sha256(), "plug-in modules": modules}
     for module in modules:
-        facts.update(module_fingerprint(module))
+        for key, value in module_fingerprint(module).items():
+            _add_fact(facts, key, value)
     facts.update(plugin_table())
     facts["replaced built-ins"] = replaced_built_ins()
-    facts.update(run_read_facts(exclude, reads, covered=facts))
+    for key, value in run_read_facts(exclude, reads, covered=facts).items():
+        _add_fact(facts, key, value)
     return facts
 
 
@@ -403,7 +463,9 @@ def run_read_facts(exclude: Iterable[Any] = (), reads: Iterable[ReadFile] = (),
 class ReadsRecorder:
     """Adds the user's files a pool's workers read (``pool.files_read``, :mod:`dv2s_gym.workers.pool`) to the code
     identity a run recorded in the JSON file ``record`` (under :data:`CODE_IDENTITY`, inside the objects ``where``
-    names), as new ones appear, so that a resume checks them too; files under a folder of ``exclude`` are left out."""
+    names), as new ones appear, so that a resume checks them too; files under a folder of ``exclude`` are left out.
+    A recorded file whose SHA-256 is another now (it changed while the run ran) raises
+    :class:`~scenario_bank.read_files.ReadFilesError`."""
 
     def __init__(self, record: Path, pool: Any, exclude: Iterable[Any] = (), where: Iterable[str] = ()) -> None:
         self.record_file, self.pool, self.exclude, self.where = Path(record), pool, list(exclude), list(where)
@@ -420,8 +482,12 @@ class ReadsRecorder:
         for key in self.where:
             holder = holder[key]
         identity = dict(holder.get(CODE_IDENTITY) or {})
-        new = {key: value for key, value in run_read_facts(self.exclude, reads.values(), covered=identity).items()
-               if key not in identity}
+        facts = run_read_facts(self.exclude, reads.values(), covered=identity)
+        for key, value in facts.items():
+            if key in identity and identity[key] != value and _USER_FILE.match(key):
+                found = _found_file(key)
+                raise changed_while_running(str(found) if found is not None else key, str(identity[key]), value)
+        new = {key: value for key, value in facts.items() if key not in identity}
         if new:
             holder[CODE_IDENTITY] = {**identity, **new}
             atomic_write_json(self.record_file, values)
@@ -462,7 +528,7 @@ BUILT_IN = "dv2s-gym's own"
 
 def _source_sha256(module: str) -> str:
     found = _module_file(module)
-    return file_sha256(found) if found is not None else "not found"
+    return _hash(found) if found is not None else "not found"
 
 
 def detector_identity(kinds: Iterable[str]) -> Dict[str, Dict[str, Any]]:
@@ -520,7 +586,7 @@ def changed_files(facts: Mapping[str, str]) -> List[str]:
     changed = []
     for key, recorded in sorted(facts.items()):
         path = _found_file(key)
-        now = file_sha256(path) if path is not None else "missing"
+        now = _hash(path) if path is not None else "missing"
         if now != recorded:
             changed.append(f"{key}: recorded {str(recorded)[:12]}, now {now[:12]}")
     return changed

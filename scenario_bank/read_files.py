@@ -29,9 +29,10 @@ from typing import Dict, Iterable, Iterator, List, Optional, Set, Tuple
 
 from scenario_bank.atomic import file_sha256
 from scenario_bank.cache import cache_dir
+from scenario_bank.errors import DV2SError
 
-__all__ = ["ReadFile", "watch", "reading_for", "user_reads", "unsent_reads", "detector_label",
-           "plugin_label", "DV2S_ROOT", "DV2S_PACKAGES", "python_roots", "python_path_folders", "SYSTEM_FOLDERS"]
+__all__ = ["ReadFile", "ReadFilesError", "watch", "reading_for", "user_reads", "unsent_reads", "detector_label",
+           "plugin_label", "labelled_module", "unwatched", "changed_while_running", "DV2S_ROOT", "DV2S_PACKAGES", "python_roots", "python_path_folders", "SYSTEM_FOLDERS"]
 
 DV2S_ROOT = Path(__file__).resolve().parents[1]
 """The folder holding dv2s-gym's four packages."""
@@ -53,6 +54,18 @@ class ReadFile:
     labels: Tuple[str, ...] = ()
 
 
+class ReadFilesError(DV2SError, ValueError):
+    """The user's files a run read cannot stand for what it did: one changed while the run ran (its episodes would
+    mix two versions of it), or two different SHA-256 would be recorded under one file's name."""
+
+
+def changed_while_running(path: str, recorded: str, now: str) -> ReadFilesError:
+    """The error for a file the run read that changed while it ran, naming the file, both SHA-256 and the fix."""
+    return ReadFilesError(f"{path} changed while the run ran (SHA-256 {recorded[:12]} -> {now[:12]}), so its "
+                          "episodes would be judged by two versions of it; the run stopped, keeping the episodes "
+                          "it finished: restore the file and resume (rerun the same command)")
+
+
 _installed = False
 _opened: Dict[str, Set[str]] = {}  # absolute path -> labels of the blocks that opened it
 _module_labels: Dict[str, Set[str]] = {}  # module name -> labels of the blocks that imported it first
@@ -61,12 +74,13 @@ _known_modules: Set[str] = set()
 _hashes: Dict[str, Tuple[int, int, str]] = {}  # path -> (mtime_ns, size, SHA-256)
 _sent: Dict[str, Tuple[str, Tuple[str, ...]]] = {}  # path -> (SHA-256, labels) given by unsent_reads
 _user_path: Dict[str, Optional[Path]] = {}  # a file's name as read -> its resolved path when the user's, else None
-_changes = [0]  # bumped by every new file or label, so a worker with nothing new read answers at once
-_last_sent = [(-1, -1)]
+
+
+_quiet = [0]  # > 0 inside unwatched(): a file hashed for a run's identity is not a file the code read
 
 
 def _hook(event: str, args: tuple) -> None:
-    if event != "open":
+    if event != "open" or _quiet[0]:
         return
     try:
         path, mode, flags = args
@@ -82,13 +96,9 @@ def _hook(event: str, args: tuple) -> None:
             return
         if not path.startswith("/"):
             path = os.path.join(os.getcwd(), path)
-        labels = _opened.get(path)
-        if labels is None:
-            labels = _opened[path] = set()
-            _changes[0] += 1
-        if _scopes and _scopes[-1] not in labels:
+        labels = _opened.setdefault(path, set())
+        if _scopes:
             labels.add(_scopes[-1])
-            _changes[0] += 1
     except Exception:  # a watcher never breaks what it watches
         return
 
@@ -102,6 +112,17 @@ def watch() -> None:
         _installed = True
 
 
+@contextmanager
+def unwatched() -> Iterator[None]:
+    """Files opened inside the block are not noted: dv2s hashing a file to record or check it is not the code
+    reading it (a check of a recorded ``limits.json`` would otherwise make it a file read outside any plug-in)."""
+    _quiet[0] += 1
+    try:
+        yield
+    finally:
+        _quiet[0] -= 1
+
+
 def detector_label(kind: str) -> str:
     """The :func:`reading_for` label of the detector of failure kind ``kind``."""
     return f"detector {kind}"
@@ -110,6 +131,17 @@ def detector_label(kind: str) -> str:
 def plugin_label(module: str) -> str:
     """The :func:`reading_for` label of the import of plug-in module ``module``."""
     return f"plug-in {module}"
+
+
+def labelled_module(label: str, detectors: Dict[str, str]) -> Optional[str]:
+    """The module a :func:`reading_for` ``label`` names: the plug-in module it imported, or the module that
+    registered the detector (``detectors``: failure kind -> module) it ran; ``None`` for another label."""
+    role, _, name = label.partition(" ")
+    if role == plugin_label("").strip():
+        return name or None
+    if role == detector_label("").strip():
+        return detectors.get(name)
+    return None
 
 
 def _sync_modules() -> List[str]:
@@ -134,7 +166,6 @@ def reading_for(label: str) -> Iterator[None]:
         _scopes.pop()
         for name in _sync_modules():
             _module_labels.setdefault(name, set()).add(label)
-            _changes[0] += 1
 
 
 def python_roots() -> List[Path]:
@@ -189,7 +220,8 @@ def _sha256(path: Path) -> Optional[str]:
         return known[2]
     if not path.is_file():
         return None
-    digest = file_sha256(path)
+    with unwatched():
+        digest = file_sha256(path)
     _hashes[key] = (stat.st_mtime_ns, stat.st_size, digest)
     return digest
 
@@ -229,13 +261,9 @@ def user_reads(exclude: Iterable[os.PathLike | str] = ()) -> Dict[str, ReadFile]
 
 
 def unsent_reads() -> List[ReadFile]:
-    """The :func:`user_reads` not given by an earlier call, or read since under a new label (what a worker process
-    sends with a task's result)."""
-    state = (_changes[0], len(sys.modules))
-    if state == _last_sent[0]:
-        return []
-    _last_sent[0] = state
-    new = []
+    """The :func:`user_reads` not given by an earlier call, read since under a new label, or whose SHA-256 changed
+    since (what a worker process sends with a task's result)."""
+    new = []  # every file is looked at again (a stat each): one edited since it was sent is sent again
     for path, read in user_reads().items():
         if _sent.get(path) != (read.sha256, read.labels):
             _sent[path] = (read.sha256, read.labels)

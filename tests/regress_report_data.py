@@ -110,7 +110,7 @@ def make_report(out_dir: Path, scenarios: Sequence[str] = ("highway_cut_in_from_
     verdicts = [v["comparison"]["verdict"] for v in per_scenario.values()]
     verdict = "FAIL" if "FAIL" in verdicts else "INCONCLUSIVE" if "INCONCLUSIVE" in verdicts else "PASS"
     return {
-        "schema": "dv2s-regress", "schema_version": 3, "created": "2026-11-23T00:00:00Z", "dv2s_version": "0.1.0",
+        "schema": "dv2s-regress", "schema_version": 4, "created": "2026-11-23T00:00:00Z", "dv2s_version": "0.1.0",
         "bank": {"path": "scenario_bank/scenarios", "version": "test", "scenarios": list(scenarios)},
         "settings": {"episodes": len(seeds), "seed": 0, "margin": margin, "alpha": 0.05, "sequential": False, "failure": ["collision", "off_road"],
                      "env_config": None, "backend": "local", "workers": 1},

@@ -62,7 +62,7 @@ def test_replay_of_a_mining_run_does_not_load_its_settings_policy(capsys, payloa
 
 
 def test_replay_of_a_report_episode_does_not_load_the_reports_policy(capsys, payload):
-    report = {"schema": "dv2s-regress", "schema_version": 3, "candidate": {"spec": "marker:make"},
+    report = {"schema": "dv2s-regress", "schema_version": 4, "candidate": {"spec": "marker:make"},
               "bank": {"hashes": {}}, "settings": {"env_config": {}, "failure": ["collision", "off_road"]},
               "episodes": [{"id": "highway_lead_vehicle_brakes/0",
                             "candidate": {"scenario": "highway_lead_vehicle_brakes", "seed": 0,
@@ -106,7 +106,7 @@ def test_replay_of_a_report_episode_bounds_its_env_config(tmp_path):
     from dv2s_gym.regress.replay import replay_episode
     from envs.trace_bounds import TraceConfigError
 
-    report = {"schema": "dv2s-regress", "schema_version": 3, "candidate": {"spec": "rule"},
+    report = {"schema": "dv2s-regress", "schema_version": 4, "candidate": {"spec": "rule"},
               "bank": {"hashes": {}}, "settings": {"env_config": {"screen_width": 10**6}, "failure": ["collision", "off_road"]},
               "episodes": [{"id": "highway_lead_vehicle_brakes/0",
                             "candidate": {"scenario": "highway_lead_vehicle_brakes", "seed": 0,

@@ -1,7 +1,8 @@
 """What a plug-in reads at run time is part of a run's identity: a detector's threshold in a data file beside it, and
 a helper module it imports only inside ``detect`` (only the worker processes import it). A changed one refuses a
 resumed ``dv2s mine`` and a ``dv2s regress --baseline-report`` naming the file and both hashes; an unchanged rerun
-resumes, and so does a run whose plug-in folder moved with the Python path."""
+resumes, and so does a run whose plug-in folder moved with the Python path. Two plug-ins' ``limits.json`` are two
+files, each checked against its own; a file edited while a run runs stops it."""
 
 from __future__ import annotations
 
@@ -93,7 +94,7 @@ def _edit(path: Path) -> None:
     path.write_text('{"speed": 1000.0}' if path.suffix == ".json" else "LIMIT = 1000.0\n", encoding="utf-8")
 
 
-FACT = {"limits": "user file limits.json (SHA-256)", "helper": "user module speedhelp (SHA-256)"}
+FACT = {"limits": "user file limits.json read by myfail (SHA-256)", "helper": "user module speedhelp (SHA-256)"}
 
 
 @pytest.mark.slow
@@ -127,7 +128,7 @@ def test_an_unchanged_rerun_resumes_and_so_does_one_whose_plugin_folders_moved(t
     assert moved.returncode == 0, moved.stderr[-2000:]
     assert len((tmp_path / "run" / "episodes.jsonl").read_text().splitlines()) == 4
     recorded = json.loads((tmp_path / "run" / "settings.json").read_text())["code_identity"]
-    assert FACT["helper"] in recorded and "module file units.py (SHA-256)" in recorded
+    assert FACT["helper"] in recorded and "module file units.py beside myfail (SHA-256)" in recorded
     assert not any(str(tmp_path) in key for key in recorded)
     _edit(tmp_path / "moved" / "lib" / "speedhelp.py")  # moved, then changed: still refused
     assert _mine(tmp_path / "moved", tmp_path, 5).returncode == 2
@@ -222,3 +223,139 @@ def test_the_files_a_pools_workers_read_are_added_to_the_runs_record_as_they_app
     with pytest.raises(ValueError, match=r"files the code read differ: user file limits\.json \(SHA-256\): run has "):
         run_identity.check_code_unchanged({"code_identity": identity}, run="run holds a run", error=ValueError,
                                           now={"dv2s sources (SHA-256)": "x"})
+
+
+# --------------------------------------------------------------------------- two plug-ins, each with its limits.json
+def _kind_plugin(kind: str, severity: int) -> str:
+    return LIMITS_PLUGIN.replace('"speeding"', repr(kind)).replace("sped", f"{kind}_flag").replace(
+        "severity=5", f"severity={severity}")
+
+
+def _two_plugins(base: Path) -> None:
+    """``plug/myfail.py`` (kind ``speeding``, its ``limits.json`` 20) and ``plug4/myfail4.py`` (kind ``crawling``,
+    its ``limits.json`` 1000), each reading the ``limits.json`` beside it."""
+    for folder, module, kind, limit, severity in (("plug", "myfail", "speeding", 20.0, 5),
+                                                  ("plug4", "myfail4", "crawling", 1000.0, 6)):
+        (base / folder).mkdir(parents=True)
+        (base / folder / f"{module}.py").write_text(_kind_plugin(kind, severity), encoding="utf-8")
+        (base / folder / "limits.json").write_text(json.dumps({"speed": limit}), encoding="utf-8")
+        (base / folder / "units.py").write_text(f"KMH = {limit}\n", encoding="utf-8")  # beside each: two names too
+
+
+def _dv2s_two(base: Path, order: tuple, *args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "DV2S_PLUGINS": "myfail,myfail4",
+           "PYTHONPATH": os.pathsep.join([str(ROOT)] + [str(base / folder) for folder in order])}
+    return subprocess.run([sys.executable, "-m", "dv2s_gym.cli", *args], cwd=base, env=env, capture_output=True,
+                          text=True, timeout=900)
+
+
+TWO = {"speeding": "user file limits.json read by myfail (SHA-256)",
+       "crawling": "user file limits.json read by myfail4 (SHA-256)"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("order", [("plug", "plug4"), ("plug4", "plug")])
+def test_two_plugins_limits_files_are_two_names_each_checked_against_its_own_file(tmp_path, order):
+    _two_plugins(tmp_path)
+    sha = {kind: run_identity.file_sha256(tmp_path / folder / "limits.json")
+           for kind, folder in (("speeding", "plug"), ("crawling", "plug4"))}
+    regress = ("regress", "--policy", "idm", "--scenarios", SCENARIO, "--episodes", "2",
+               "--failure", "speeding,crawling", "--workers", "2")
+    first = _dv2s_two(tmp_path, order, *regress, "--baseline", "rule", "--out", "k1")
+    assert first.returncode in (0, 3), first.stderr[-2000:]
+    recorded = json.loads((tmp_path / "k1" / "run.json").read_text())["settings"]["code_identity"]
+    assert {TWO[kind]: recorded.get(TWO[kind]) for kind in TWO} == {TWO[kind]: sha[kind] for kind in TWO}
+    assert "module file units.py beside myfail (SHA-256)" in recorded
+    assert "module file units.py beside myfail4 (SHA-256)" in recorded
+    reads = json.loads((tmp_path / "k1" / "report.json").read_text())["code_identity"]["files read by detectors"]
+    for kind in TWO:  # each kind's own limits.json (and its plug-in module), not the other's
+        assert {key: value for key, value in reads[kind].items() if key.startswith("user file")} == {
+            TWO[kind]: sha[kind]}
+    shutil.copy(tmp_path / "k1" / "report.json", tmp_path / "base.json")  # as the first run wrote it
+    again = _dv2s_two(tmp_path, order, *regress, "--baseline", "rule", "--out", "k1")  # nothing changed: resumes
+    assert again.returncode in (0, 3), again.stderr[-2000:]
+    same = _dv2s_two(tmp_path, order, *regress, "--baseline-report", "base.json", "--out", "k2")
+    assert same.returncode in (0, 3), same.stderr[-2000:]
+    (tmp_path / "plug" / "limits.json").write_text('{"speed": 1000.0}', encoding="utf-8")  # decides speeding
+    now = run_identity.file_sha256(tmp_path / "plug" / "limits.json")
+    resumed = _dv2s_two(tmp_path, order, *regress, "--baseline", "rule", "--out", "k1")
+    assert resumed.returncode == 2
+    assert f"{TWO['speeding']}: run has {sha['speeding'][:12]}, now {now[:12]}" in resumed.stderr
+    cand = _dv2s_two(tmp_path, order, *regress, "--baseline-report", "base.json", "--out", "k3")
+    assert cand.returncode == 2
+    line = cand.stderr.strip().splitlines()[-1]
+    assert "judged failure kind 'speeding' by a plug-in that read files which differ here now" in line
+    assert f"{TWO['speeding']}: recorded {sha['speeding'][:12]}, now {now[:12]}" in line
+
+
+def test_a_plugins_data_file_is_named_beside_the_module_that_read_it_and_found_there_again(tmp_path, monkeypatch):
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / f"reader_{folder}.py").write_text("X = 1\n", encoding="utf-8")
+        (tmp_path / folder / "limits.json").write_text(json.dumps({"folder": folder}), encoding="utf-8")
+        monkeypatch.syspath_prepend(str(tmp_path / folder))
+    reads = [read_files.ReadFile(str(tmp_path / folder / "limits.json"), None,
+                                 run_identity.file_sha256(tmp_path / folder / "limits.json"),
+                                 (read_files.plugin_label(f"reader_{folder}"),)) for folder in ("a", "b")]
+    facts = run_identity.read_facts(reads)
+    assert facts == {f"user file limits.json read by reader_{folder} (SHA-256)": read.sha256
+                     for folder, read in zip("ab", reads)}
+    assert run_identity.changed_files(facts) == []
+    (tmp_path / "b" / "limits.json").write_text("{}", encoding="utf-8")
+    assert [line.partition(":")[0] for line in run_identity.changed_files(facts)] == [
+        "user file limits.json read by reader_b (SHA-256)"]
+    unlabelled = [read_files.ReadFile(read.path, None, read.sha256, ()) for read in reads]  # read by no plug-in
+    assert run_identity.read_facts(unlabelled) == {f"user file {Path(read.path).resolve()} (SHA-256)": read.sha256
+                                                   for read in reads}  # one relative name for both: their paths
+    with pytest.raises(read_files.ReadFilesError, match=r"two different files the code read would be recorded as "
+                                                        r"'user module reader_a \(SHA-256\)'"):
+        run_identity.read_facts([read_files.ReadFile(str((tmp_path / "a" / "reader_a.py").resolve()), "reader_a",
+                                                     digest * 64, ()) for digest in "01"])
+
+
+def test_a_file_whose_sha256_changes_while_a_pool_runs_stops_it_naming_the_file_and_both_hashes(tmp_path):
+    from dv2s_gym.workers.pool import LocalBackend
+
+    pool = LocalBackend(workers=1)
+    path = str(tmp_path / "limits.json")
+    pool._note_read(read_files.ReadFile(path, None, "a" * 64, ("detector speeding",)))
+    pool._note_read(read_files.ReadFile(path, None, "a" * 64, ("plug-in myfail",)))
+    assert pool.files_read[path].labels == ("detector speeding", "plug-in myfail")
+    with pytest.raises(read_files.ReadFilesError, match=rf"{path} changed while the run ran \(SHA-256 aaaaaaaaaaaa "
+                                                        r"-> bbbbbbbbbbbb\).*restore the file and resume"):
+        pool._note_read(read_files.ReadFile(path, None, "b" * 64, ("detector speeding",)))
+
+
+@pytest.mark.slow
+def test_a_data_file_edited_while_a_mining_run_runs_stops_it_keeping_its_episodes(tmp_path):
+    import time
+
+    limits = _plugins(tmp_path / "p", "limits")
+    before = run_identity.file_sha256(limits)
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "DV2S_PLUGINS": "myfail",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), str(tmp_path / "p" / "plugins"), str(tmp_path / "p" / "lib")])}
+    def command(budget: int) -> list:
+        return [sys.executable, "-m", "dv2s_gym.cli", "mine", "--policy", "idm", "--scenarios", SCENARIO, "--budget",
+                str(budget), "--workers", "2", "--batch", "2", "--no-convert", "--no-progress", "--out", "run"]
+    episodes = tmp_path / "run" / "episodes.jsonl"
+    with subprocess.Popen(command(40), cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                          text=True) as run:
+        deadline = time.monotonic() + 600
+        while run.poll() is None and time.monotonic() < deadline and not (
+                episodes.is_file() and len(episodes.read_text().splitlines()) >= 2):
+            time.sleep(0.2)
+        _edit(limits)  # the detector reads it again for every episode
+        _, err = run.communicate(timeout=900)
+    after = run_identity.file_sha256(limits)
+    assert run.returncode == 2, err[-2000:]
+    line = err.strip().splitlines()[-1]
+    assert f"{limits.resolve()} changed while the run ran (SHA-256 {before[:12]} -> {after[:12]})" in line
+    assert "restore the file and resume" in line
+    kept = len(episodes.read_text().splitlines())
+    assert 2 <= kept < 40
+    recorded = json.loads((tmp_path / "run" / "settings.json").read_text())["code_identity"]
+    assert recorded[FACT["limits"]] == before
+    limits.write_text('{"speed": 20.0}', encoding="utf-8")  # restored: the run resumes where it stopped
+    resumed = subprocess.run(command(kept + 2), cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert len(episodes.read_text().splitlines()) == kept + 2

@@ -48,7 +48,7 @@ def noisy_run(tmp_path_factory):
 def test_report_has_the_documented_schema(noisy_run):
     out, report = noisy_run
     assert report.to_dict() == json.loads((out / "report.json").read_text())
-    assert report.to_dict()["schema"] == SCHEMA == "dv2s-regress" and report.to_dict()["schema_version"] == SCHEMA_VERSION == 3
+    assert report.to_dict()["schema"] == SCHEMA == "dv2s-regress" and report.to_dict()["schema_version"] == SCHEMA_VERSION == 4
     assert {"created", "dv2s_version", "bank", "settings", "candidate", "baseline", "episodes", "scenarios",
             "overall", "verdict", "regressed", "newly_failing", "errors", "stopped_early"} <= report.to_dict().keys()
     assert report.to_dict()["bank"]["scenarios"] == PAIR and len(report.to_dict()["bank"]["version"]) == 64

@@ -122,7 +122,7 @@ def test_bad_input_exits_2_with_one_line(failing_run, tmp_path, capsys):
     (tmp_path / "v7.json").write_text(json.dumps(old))
     assert regress("--policy", "rule", "--baseline-report", str(tmp_path / "v7.json"), "--out", str(tmp_path / "c")) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "schema version 7, this dv2s-gym reads version 3" in err
+    assert err.count("\n") == 1 and "schema version 7, this dv2s-gym reads version 4" in err
     assert regress("--policy", "rule", "--baseline", "rule", "--config", "{duration: 3", "--out", str(tmp_path)) == 2
     assert "--config must be a JSON object" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_info:  # argparse: the two baselines exclude each other

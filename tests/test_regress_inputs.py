@@ -136,7 +136,7 @@ def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, m
     (tmp_path / "weights.json").write_text('{"w": 2}')  # the data file an option names changed
     after = resume_fingerprint(spec)
     changed = sorted(key for key in before.keys() | after.keys() if before.get(key) != after.get(key))
-    assert changed == ["module file stealth_cfg.py (SHA-256)",  # named relative to the working folder holding it
+    assert changed == ["module file stealth_cfg.py beside helped_policy_here (SHA-256)",  # beside the policy module
                        "option weights file weights.json (SHA-256)"]
     from policies import run_identity
 
@@ -153,7 +153,7 @@ def test_resume_is_refused_when_a_helper_module_of_the_policy_changed(tmp_path, 
                      progress=False)
     run_regression("helped_policy_there:make", "rule", **arguments)
     (tmp_path / "stealth_cfg2.py").write_text("ACTION = 4\n")
-    with pytest.raises(ResumeMismatchError, match=r"stealth_cfg2\.py \(SHA-256\)"):
+    with pytest.raises(ResumeMismatchError, match=r"stealth_cfg2\.py beside helped_policy_there \(SHA-256\)"):
         run_regression("helped_policy_there:make", "rule", **arguments)
 
 
@@ -188,7 +188,7 @@ def test_a_run_against_a_baseline_report_repeats_its_seed_env_config_and_failure
     from dv2s_gym.regress.report import baseline_defaults
 
     path = tmp_path / "report.json"
-    path.write_text(json.dumps({"schema": "dv2s-regress", "schema_version": 3,
+    path.write_text(json.dumps({"schema": "dv2s-regress", "schema_version": 4,
                                 "settings": {"seed": 7, "env_config": {"duration": 4}, "failure": ["collision", "stall"]}}))
     kinds = ["collision", "stall"]
     assert baseline_defaults(path, None, None) == (7, {"duration": 4}, kinds)
@@ -197,3 +197,23 @@ def test_a_run_against_a_baseline_report_repeats_its_seed_env_config_and_failure
     assert baseline_defaults(path, 2, {}, "off_road") == (2, {}, "off_road")
     # all given: the report is not read (a missing one is refused later, by the run itself)
     assert baseline_defaults(tmp_path / "missing.json", 1, {}, "collision") == (1, {}, "collision")
+
+
+def test_unknown_kinds_taken_from_a_baseline_report_name_the_report_its_plugins_and_the_fix(tmp_path, capsys):
+    path = tmp_path / "report.json"
+    judged = {kind: {"failure type": module, "detector": module, "sources (SHA-256)": {module: "a" * 64}}
+              for kind, module in (("speeding", "myfail"), ("speeding2", "myfail2"))}
+    path.write_text(json.dumps({"schema": "dv2s-regress", "schema_version": 4,
+                                "code_identity": {"detectors": judged},
+                                "settings": {"seed": 0, "env_config": {}, "failure": ["speeding", "speeding2"]}}))
+    assert main(["regress", "--policy", "idm", "--baseline-report", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--failure:" not in err
+    assert (f"baseline report {path} was judged on failure kinds speeding, speeding2, unknown here (speeding: "
+            "plug-in module myfail; speeding2: plug-in module myfail2); load them with DV2S_PLUGINS=myfail,myfail2, "
+            "or pass --failure with kinds this run knows (collision, off_road, stall") in err
+    assert not (tmp_path / "out").exists()
+    # a --failure the user typed is the user's: an unknown one is still named as the option's
+    assert main(["regress", "--policy", "idm", "--baseline-report", str(path), "--failure", "speeding",
+                 "--out", str(tmp_path / "out")]) == 2
+    assert "--failure: unknown failure kind 'speeding'" in capsys.readouterr().err

@@ -4,17 +4,19 @@
 :mod:`dv2s_gym.regress.records`, read by attribute); its ``to_json()`` is the JSON object below, key for key and in
 this order, and :func:`load_report` reads a ``report.json`` back into one.
 
-JSON schema ``dv2s-regress``, version 3 (:data:`SCHEMA_VERSION`; a change to any key below
-bumps it, and ``--baseline-report`` refuses a report of another version)::
+JSON schema ``dv2s-regress``, version 4 (:data:`SCHEMA_VERSION`; a change to any key below
+bumps it, and ``--baseline-report`` refuses a report of another version: version 3 did not record the
+``"files read by detectors"``, so a version 3 baseline cannot say which files decided its failure kinds)::
 
     {
-      "schema": "dv2s-regress", "schema_version": 3,
+      "schema": "dv2s-regress", "schema_version": 4,
       "created": ISO-8601 time (UTC), "dv2s_version": "0.1.0",
       "code_identity": {"dv2s sources (SHA-256)", "plug-in modules": {module: SHA-256 of its source},
                         "detectors": {kind: {"failure type": module, "detector": module,
                                              "sources (SHA-256)": {module: SHA-256}}},
                         "replaced built-ins": [phrases],
-                        "files read by detectors": {kind: {"user file limits.json (SHA-256)": SHA-256, ...}}}
+                        "files read by detectors": {kind: {"user file limits.json read by myfail (SHA-256)":
+                                                             SHA-256, ...}}}
                                                    the code that judged the episodes,
       "bank": {"path": bank folder, "version": SHA-256 over the scenarios used (name + script),
                "scenarios": [names], "hashes": {name: SHA-256 of its script}},
@@ -132,7 +134,7 @@ __all__ = [
     "format_summary", "failures_text", "headline", "paired_tables", "power_lines", "scenarios_by_severity", "warnings"]
 
 SCHEMA = "dv2s-regress"
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """The format of ``report.json`` (bumped when its fields change; a report of another version is refused)."""
 CONFIDENCE = 0.95
 
@@ -394,13 +396,46 @@ def baseline_defaults(path: Union[str, os.PathLike], seed: Optional[int], env_co
                       failure: Union[None, str, Sequence[str]] = None
                       ) -> Tuple[Optional[int], Optional[Dict[str, Any]], Union[None, str, Sequence[str]]]:
     """The seed, env config and failure kinds of a run against the baseline report at ``path``: those given, else
-    the report's (by default a run repeats the episodes the baseline ran and judges them as it did)."""
+    the report's (by default a run repeats the episodes the baseline ran and judges them as it did).
+
+    Raises:
+        RegressError: the report's failure kinds, taken because ``failure`` is ``None``, are not all known here
+            (their plug-ins are not loaded), naming the kinds, the plug-in modules the report records for them and
+            the fix.
+    """
     if seed is not None and env_config is not None and failure is not None:
         return seed, env_config, failure
-    old = load_report(path).settings
+    report = load_report(path)
+    old = report.settings
+    if failure is None and old.failure:
+        _check_report_kinds_known(report, path, list(old.failure))
     return (old.seed if seed is None else seed,
             old.env_config if env_config is None else env_config,
             (list(old.failure) if old.failure else None) if failure is None else failure)
+
+
+def _check_report_kinds_known(report: RegressReport, path: Union[str, os.PathLike], kinds: Sequence[str]) -> None:
+    """Refuse the failure ``kinds`` a baseline report was judged on when some are unknown here, naming the plug-in
+    modules the report records for them (``code_identity["detectors"]``) and the fix."""
+    known = failure_kinds()
+    unknown = [kind for kind in kinds if kind not in known]
+    if not unknown:
+        return
+    detectors = dict((report.code_identity or {}).get("detectors") or {})
+    modules: Dict[str, List[str]] = {}
+    for kind in unknown:
+        entry = detectors.get(kind)
+        entry = entry if isinstance(entry, Mapping) else {}
+        modules[kind] = sorted({str(entry.get(role)) for role in ("failure type", "detector")
+                                if entry.get(role) and entry.get(role) != BUILT_IN})
+    named = "; ".join(f"{kind}: plug-in module {', '.join(found)}" if found else f"{kind}: no plug-in module recorded"
+                      for kind, found in modules.items())
+    needed = sorted({module for found in modules.values() for module in found})
+    load = f"load them with DV2S_PLUGINS={','.join(needed)}, or " if needed else ""
+    raise RegressError(
+        f"baseline report {path} was judged on failure kind{'s' if len(unknown) > 1 else ''} "
+        f"{', '.join(unknown)}, unknown here ({named}); {load}pass --failure with kinds this run knows "
+        f"({', '.join(known)})")
 
 
 def load_report(path: Union[str, os.PathLike]) -> RegressReport:

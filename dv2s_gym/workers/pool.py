@@ -8,7 +8,8 @@ tasks. Before its first task, each worker imports the plug-in modules of the pro
 (:func:`~dv2s_gym.workers.tasks.worker_plugins`: a plug-in's failure type and detector register there too); a
 worker that cannot import one stops the run with a :class:`WorkerError` naming the module. With each result a
 worker sends the user's files it has read since its last one (:func:`scenario_bank.read_files.unsent_reads`), kept
-in :attr:`LocalBackend.files_read`. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
+in :attr:`LocalBackend.files_read`; a file whose SHA-256 changed since a worker first sent it stops the run
+(:class:`~scenario_bank.read_files.ReadFilesError`, before the result read with it is handed on). A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
 result within the per-episode timeout is killed and replaced; its task is retried once
 (``retries``), then reported as an error result ``{"error": ..., "id", "role", ...}`` -
 never silently dropped; a task that finishes on a retry carries ``"worker_restarts"``, the
@@ -29,7 +30,7 @@ from dataclasses import astuple, replace
 from multiprocessing.connection import wait
 from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tuple
 
-from scenario_bank.read_files import ReadFile, unsent_reads, watch
+from scenario_bank.read_files import ReadFile, changed_while_running, unsent_reads, watch
 from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend, OnResult, default_workers
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.tasks import (TaskFunction, function_for, gave_up_result, result_object, run_task,
@@ -213,7 +214,11 @@ class LocalBackend(Backend):
         labels of every worker that read it and the SHA-256 the first one saw."""
 
     def _note_read(self, read: ReadFile) -> None:
+        """Keep a file a worker read; one whose SHA-256 differs from the one first seen stops the run
+        (:class:`~scenario_bank.read_files.ReadFilesError`): it changed while the run ran."""
         known = self.files_read.get(read.path)
+        if known is not None and known.sha256 != read.sha256:
+            raise changed_while_running(read.path, known.sha256, read.sha256)
         if known is None:
             self.files_read[read.path] = read
         elif not set(read.labels) <= set(known.labels):
