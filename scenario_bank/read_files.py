@@ -41,6 +41,9 @@ SYSTEM_FOLDERS = ("/dev", "/proc", "/sys", "/etc", "/usr", "/lib", "/lib64", "/b
                   "/opt/conda")
 """Folders of the system whose files are no user's code or data."""
 _SKIPPED_PARTS = {"__pycache__", "site-packages", "dist-packages", "node_modules"}
+_METADATA_SUFFIXES = (".egg-info", ".dist-info")
+"""Folders of installed distributions' metadata (an editable install writes one beside the sources): read when a
+version is looked up, never code or data of a run."""
 
 
 @dataclass(frozen=True)
@@ -197,7 +200,8 @@ def python_path_folders() -> List[Path]:
 def _is_user_file(path: Path, never: List[Path], python_path: List[Path]) -> bool:
     """Whether ``path`` is the user's: not Python's, dv2s's or the run's own (``never``), and either on the Python
     path or out of the system's and the temporary folders."""
-    if _under(path, never) or _SKIPPED_PARTS & set(path.parts):
+    if _under(path, never) or _SKIPPED_PARTS & set(path.parts) or any(
+            part.endswith(_METADATA_SUFFIXES) for part in path.parts):
         return False
     if _under(path, python_path):
         return True

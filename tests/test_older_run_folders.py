@@ -113,7 +113,7 @@ _PROGRESS = {"schema": "dv2s-dagger-checkpoint", "identity": {"seed": 0}, "itera
 
 
 @pytest.mark.parametrize("format_keys, found", [({"schema_version": 1}, "no format"), ({"version": 1}, "format 1"),
-                                                ({"version": 2}, None)])
+                                                ({"version": 2}, "format 2"), ({"version": 3}, None)])
 def test_a_dagger_checkpoint_of_another_format_is_refused(tmp_path, format_keys, found):
     folder = tmp_path / CHECKPOINT_DIR
     folder.mkdir()
@@ -124,7 +124,7 @@ def test_a_dagger_checkpoint_of_another_format_is_refused(tmp_path, format_keys,
         return
     with pytest.raises(DAggerResumeError) as error:
         checkpoint.load()
-    assert str(error.value) == _refusal(folder, "the checkpoint of an unfinished DAgger run", "progress.json", found, 2)
+    assert str(error.value) == _refusal(folder, "the checkpoint of an unfinished DAgger run", "progress.json", found, 3)
 
 
 @pytest.mark.parametrize("format_keys, found", [({"version": 3}, "format 3"), ({}, "no format")])

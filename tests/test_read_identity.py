@@ -177,6 +177,24 @@ def test_a_file_read_in_a_labelled_block_is_a_user_file_with_that_label(tmp_path
     assert read_files.user_reads(exclude=[folder]).get(str(data.resolve())) is None
 
 
+def test_installed_distributions_metadata_on_the_python_path_is_no_user_file(tmp_path, monkeypatch):
+    """An editable install leaves ``<name>.egg-info`` beside the sources, on the Python path; looking up a version
+    reads it, and a checkout's own metadata must not enter a run's identity."""
+    folder = tmp_path / "checkout"
+    for name in ("mine.egg-info", "other-1.0.dist-info"):
+        (folder / name).mkdir(parents=True)
+        (folder / name / "PKG-INFO").write_text("Name: x\n", encoding="utf-8")
+    data = folder / "limits.json"
+    data.write_text("{}", encoding="utf-8")
+    monkeypatch.syspath_prepend(str(folder))
+    read_files.watch()
+    for path in (folder / "mine.egg-info" / "PKG-INFO", folder / "other-1.0.dist-info" / "PKG-INFO", data):
+        path.read_text(encoding="utf-8")
+    found = read_files.user_reads()
+    assert str(data.resolve()) in found
+    assert not any(".egg-info" in path or ".dist-info" in path for path in found)
+
+
 def test_a_recorded_user_file_is_found_again_relative_to_the_python_path(tmp_path, monkeypatch):
     old, new = tmp_path / "old", tmp_path / "new"
     old.mkdir()
