@@ -156,6 +156,25 @@ def test_a_baseline_report_whose_detector_read_a_file_changed_since_is_refused(t
     assert not (tmp_path / "cand" / "report.json").exists()
 
 
+@pytest.mark.slow
+def test_rerunning_a_finished_regression_keeps_the_files_its_detectors_read_in_its_report(tmp_path):
+    """The documented resume of a finished run runs no worker: its rewritten report still names the file the
+    detector read, so a baseline made of it is refused once the file changed."""
+    changed = _plugins(tmp_path / "p", "limits")
+    argv = ["regress", "--policy", "idm", "--baseline", "rule", "--scenarios", SCENARIO, "--episodes", "2",
+            "--failure", "speeding", "--workers", "2", "--out", "base"]
+    for _ in range(2):
+        done = _dv2s(tmp_path / "p", tmp_path, *argv)
+        assert done.returncode in (0, 3), done.stderr[-2000:]
+        recorded = json.loads((tmp_path / "base" / "report.json").read_text())["code_identity"]
+        assert recorded["files read by detectors"]["speeding"][FACT["limits"]] == run_identity.file_sha256(changed)
+    _edit(changed)
+    cand = _dv2s(tmp_path / "p", tmp_path, "regress", "--policy", "idm", "--baseline-report", "base/report.json",
+                 "--failure", "speeding", "--workers", "2", "--out", "cand")
+    assert cand.returncode == 2, cand.stderr[-2000:]
+    assert "read files which differ here now" in cand.stderr
+
+
 # --------------------------------------------------------------------------- the watcher and the names, in process
 def test_a_file_read_in_a_labelled_block_is_a_user_file_with_that_label(tmp_path, monkeypatch):
     folder = tmp_path / "plugs"

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import math
 import os
 import socket
@@ -268,12 +269,27 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
                           candidate=plan.candidate_info, baseline=plan.baseline_info,
                           episodes=episodes.paired(ran.seeds), stopped_early=ran.stopped_early,
                           sequential=ran.sequential,
-                          code_identity={**plan.judged_by, DETECTOR_READS: detector_reads(plan.failure, ran.reads)})
+                          code_identity={**plan.judged_by, DETECTOR_READS: _with_earlier_reads(
+                              store.root, detector_reads(plan.failure, ran.reads))})
     report = report.replace(hostname=socket.gethostname(),
                             timing={name: round(value, 3) for name, value in episodes.timing.items()},
                             duration=round(time.time() - started, 3))
     write_reports(report, store.root, progress=progress, clips=clips)
     return report
+
+
+def _with_earlier_reads(out: Path, reads: Dict[str, Dict[str, str]]) -> Dict[str, Dict[str, str]]:
+    """``reads`` (per judged kind, the files its plug-in read in this session) with those the run's earlier sessions
+    recorded in the ``report.json`` of ``out``: a resumed run whose episodes were all done runs no worker, and its
+    report must still name the files that judged them (a changed one was refused when the run resumed)."""
+    try:
+        earlier = json.loads((out / "report.json").read_text(encoding="utf-8"))["code_identity"][DETECTOR_READS]
+    except (OSError, ValueError, KeyError, TypeError):
+        return reads
+    if not isinstance(earlier, dict):
+        return reads
+    return {kind: {**(earlier.get(kind) if isinstance(earlier.get(kind), dict) else {}), **facts}
+            for kind, facts in reads.items()}
 
 
 @dataclasses.dataclass
