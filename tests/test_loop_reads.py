@@ -101,7 +101,7 @@ def test_a_loop_resumed_after_its_detectors_data_file_changed_is_refused_naming_
     first = _loop(plugins, tmp_path)
     finished = (0, 1, 3)  # the loop's verdicts; 2 is a refusal
     assert first.returncode in finished and "no mined scenario was kept" in first.stderr, first.stderr[-2000:]
-    key = "user file limits.json (SHA-256)"
+    key = "user file limits.json read by myfail (SHA-256)"  # named beside the plug-in that read it
     recorded = json.loads((tmp_path / "loop" / "loop.json").read_text())[CODE_IDENTITY]
     assert recorded[key] == file_sha256(limits)  # read by the mining workers only
     again = _loop(plugins, tmp_path)  # unchanged: resumes (nothing is left to do)
