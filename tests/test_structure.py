@@ -27,7 +27,7 @@ import re
 import textwrap
 import sys
 from pathlib import Path
-from typing import Dict, List, Optional, Set, Tuple
+from typing import Callable, Dict, List, Optional, Set, Tuple
 
 import pytest
 
@@ -2884,8 +2884,16 @@ def _module_of(shown: str) -> str:
 def kinds_spelled_out(files: Dict[str, Path], kinds: frozenset) -> Dict[str, List[str]]:
     """``path`` -> :func:`kind_strings_compared` for each of ``files`` (the file read for each path relative to the
     repository), with the kind tables each imports from another of them (``from pkg.frame import VEHICLES``)."""
+    return _each_with_imported_tables(files, kinds, lambda shown, tree, imported: kind_strings_compared(
+        tree, kinds, shown in KINDS_UNDER_ANY_NAME, imported))
+
+
+def _each_with_imported_tables(files: Dict[str, Path], words: frozenset,
+                               check: Callable[[str, ast.AST, frozenset], List[str]]) -> Dict[str, List[str]]:
+    """``path`` -> what ``check(path, tree, imported)`` finds in each of ``files``, ``imported`` being the names of
+    the tables of ``words`` the file imports from another of them (``from pkg.frame import VEHICLES``)."""
     trees = {shown: _parsed(path) for shown, path in files.items()}
-    tables = {_module_of(shown): kind_tables(tree, kinds) for shown, tree in trees.items()}
+    tables = {_module_of(shown): kind_tables(tree, words) for shown, tree in trees.items()}
     found = {}
     for shown, tree in trees.items():
         module = _module_of(shown)
@@ -2894,7 +2902,7 @@ def kinds_spelled_out(files: Dict[str, Path], kinds: frozenset) -> Dict[str, Lis
             if isinstance(node, ast.ImportFrom):
                 base = _imported_names(node, module, Path(shown))[-1]
                 imported.update(a.asname or a.name for a in node.names if a.name in tables.get(base, ()))
-        lines = kind_strings_compared(tree, kinds, shown in KINDS_UNDER_ANY_NAME, frozenset(imported))
+        lines = check(shown, tree, frozenset(imported))
         if lines:
             found[shown] = lines
     return found
@@ -3116,20 +3124,8 @@ def vocabulary_literals_compared(tree: ast.AST, words: frozenset, tables: frozen
 def vocabulary_spelled_out(files: Dict[str, Path], words: frozenset) -> Dict[str, List[str]]:
     """``path`` -> :func:`vocabulary_literals_compared` for each of ``files`` (relative to the repository), with the
     tables of vocabulary words each imports from another of them."""
-    trees = {shown: _parsed(path) for shown, path in files.items()}
-    tables = {_module_of(shown): kind_tables(tree, words) for shown, tree in trees.items()}
-    found = {}
-    for shown, tree in trees.items():
-        module = _module_of(shown)
-        imported = set()
-        for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom):
-                base = _imported_names(node, module, Path(shown))[-1]
-                imported.update(a.asname or a.name for a in node.names if a.name in tables.get(base, ()))
-        lines = vocabulary_literals_compared(tree, words, frozenset(imported))
-        if lines:
-            found[shown] = lines
-    return found
+    return _each_with_imported_tables(files, words, lambda shown, tree, imported: vocabulary_literals_compared(
+        tree, words, imported))
 
 
 VOCABULARY_SPELLED_OUT: Dict[str, Tuple[int, str]] = {
