@@ -66,6 +66,9 @@ def main() -> None:
     parser.add_argument("--regress", action="store_true")
     parser.add_argument("--regress-episodes", type=int, default=4)
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--train-seed", type=int, default=None,
+                        help="the fine-tuning's seed (default: the loop's own, loop seed * 1000 + 1): another value "
+                        "trains the same arm again, to see how far two runs of one recipe differ")
     args = parser.parse_args()
 
     from dv2s_gym.loop.heldout import HeldOutStore, evaluate_heldout, failure_types, paired_summary
@@ -101,7 +104,7 @@ def main() -> None:
     def fine_tune_log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
     config = TrainConfig.fine_tuning(out / "policy", steps=args.steps, weights=weights, bank_dir=bank,
-                                     seed=settings["seed"] * 1000 + 1, n_envs=2, env_config=env_config,
+                                     seed=settings["seed"] * 1000 + 1 if args.train_seed is None else args.train_seed, n_envs=2, env_config=env_config,
                                      progress_bar=False)
     if args.method == "dagger":
         from policies.imitation import DaggerConfig, dagger_fine_tune
