@@ -764,9 +764,10 @@ def test_the_failure_state_descriptor_and_state_novelty_feedback():
 def test_novelty_bandit_options_are_checked(small_space):
     from dv2s_gym.mining.sampling.samplers import sampler_params
 
-    assert sampler_params("novelty-bandit", {"explore": 0.5}) == {"explore": 0.5, "prior_new": 2.0, "prior_old": 1.0}
+    assert sampler_params("novelty-bandit", {"explore": 0.5}) == {"explore": 0.5, "prior_new": 2.0, "prior_old": 1.0,
+                                                                   "cover": 1}
     for bad, match in (({"explore": 0.0}, r"explore must be in \(0, 1\]"), ({"prior_old": -1}, "prior_old must be > 0"),
-                       ({"alpha": 0.5}, "no option 'alpha'; it takes explore, prior_new, prior_old")):
+                       ({"alpha": 0.5}, "no option 'alpha'; it takes explore, prior_new, prior_old, cover")):
         with pytest.raises(MiningError, match=match):
             make_sampler("novelty-bandit", small_space.feature_space, 0, bad)
 

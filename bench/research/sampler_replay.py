@@ -25,7 +25,7 @@ from typing import Any, Dict, List
 import numpy as np
 
 from dv2s_gym.mining.cluster import cluster_id, pair_of
-from dv2s_gym.mining.failure_state import is_novel
+from dv2s_gym.mining.failure_state import NOVELTY_RADIUS, distance, is_novel
 from scenario_bank.records import EpisodeRecord
 
 
@@ -36,7 +36,7 @@ def load(path: str) -> List[EpisodeRecord]:
 
 
 def simulate(records, budget: int, variant: str, explore: float, rng: np.random.Generator, window: int = 8,
-             prior=(2.0, 1.0)) -> Dict[str, int]:
+             prior=(2.0, 1.0), cover: int = 0, c: float = 0.5, radius: float = NOVELTY_RADIUS) -> Dict[str, int]:
     pools: Dict[str, List[EpisodeRecord]] = defaultdict(list)
     for r in records:
         pools[r.scenario].append(r)
@@ -48,9 +48,21 @@ def simulate(records, budget: int, variant: str, explore: float, rng: np.random.
     pending: List[tuple] = []
     seen_clusters, seen_pairs, archive = set(), set(), defaultdict(list)
     fed_clusters = set()
+    modes: Dict[str, List[int]] = defaultdict(list)
+    centres: Dict[str, List[Any]] = defaultdict(list)
     for _ in range(budget):
+        untried = np.flatnonzero(drawn < cover)
         if variant == "random" or rng.random() < explore:
             i = int(rng.integers(len(names)))
+        elif len(untried):
+            i = int(untried[rng.integers(len(untried))])
+        elif variant == "good-ucb":
+            t = drawn.sum() + 1
+            singletons = np.array([sum(1 for n in modes[s] if n == 1) for s in names], dtype=float)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                score = np.where(drawn > 0, singletons / np.maximum(drawn, 1) + c * np.sqrt(np.log(t) / np.maximum(drawn, 1)), np.inf)
+            best = np.flatnonzero(score >= score.max() - 1e-12)
+            i = int(best[rng.integers(len(best))])
         else:
             score = (new + prior[0]) / (drawn + prior[0] + prior[1])
             best = np.flatnonzero(score >= score.max() - 1e-12)
@@ -74,6 +86,16 @@ def simulate(records, budget: int, variant: str, explore: float, rng: np.random.
                         new[j] += 1
                     if st is not None:
                         archive[rec.scenario].append(st)
+                elif variant == "good-ucb":
+                    st = rec.failure_state
+                    if st is not None:
+                        near = [k for k, centre in enumerate(centres[rec.scenario]) if distance(st, centre) <= radius]
+                        if near:
+                            k = min(near, key=lambda k: distance(st, centres[rec.scenario][k]))
+                            modes[rec.scenario][k] += 1
+                        else:
+                            centres[rec.scenario].append(st)
+                            modes[rec.scenario].append(1)
                 elif variant == "bandit/cluster":
                     c = cluster_id(rec)
                     if c not in fed_clusters:
@@ -87,22 +109,29 @@ def main() -> None:
     p.add_argument("runs", nargs="+")
     p.add_argument("--budget", type=int, default=60)
     p.add_argument("--sims", type=int, default=300)
+    p.add_argument("--variants", nargs="*", default=["random:1", "bandit/state:0.2", "bandit/cluster:0.2",
+                                                      "bandit/state:0.5", "bandit/cluster:0.5"],
+                   help="VARIANT:EXPLORE[:COVER] (COVER: draws of every scenario before the scores rank them)")
     args = p.parse_args()
-    variants = [("random", 1.0), ("bandit/state", 0.2), ("bandit/cluster", 0.2), ("bandit/state", 0.5),
-                ("bandit/cluster", 0.5)]
+    variants = []
+    for text in args.variants:
+        name, explore, *rest = text.split(":")
+        extra = dict(item.split("=") for item in rest[1:])
+        variants.append((name, float(explore), int(rest[0]) if rest else 0, float(extra.get("c", 0.5)),
+                         float(extra.get("r", NOVELTY_RADIUS))))
     print("| run (episodes) | sampler | explore | behaviour clusters | pairs | clusters vs random [95 %] | "
           "pairs vs random [95 %] |\n|---|---|---:|---:|---:|---:|---:|")
     for path in args.runs:
         records = load(path)
-        policy = records[0]["policy"]
+        policy = records[0].policy
         results = {}
-        for v, e in variants:
+        for v, e, c, cc, rr in variants:
             rng = np.random.default_rng(12345)
-            sims = [simulate(records, args.budget, v, e, rng) for _ in range(args.sims)]
-            results[(v, e)] = {m: np.array([x[m] for x in sims], dtype=float) for m in ("clusters", "pairs")}
-        base = results[("random", 1.0)]
+            sims = [simulate(records, args.budget, v, e, rng, cover=c, c=cc, radius=rr) for _ in range(args.sims)]
+            results[(v, e, c, cc, rr)] = {m: np.array([x[m] for x in sims], dtype=float) for m in ("clusters", "pairs")}
+        base = next(res for key, res in results.items() if key[0] == "random")
         boot = np.random.default_rng(7)
-        for (v, e), res in results.items():
+        for (v, e, c, cc, rr), res in results.items():
             cells = []
             for m in ("clusters", "pairs"):
                 ratios = []
@@ -112,7 +141,7 @@ def main() -> None:
                     ratios.append(res[m][a].mean() / base[m][b].mean())
                 lo, hi = np.percentile(ratios, [2.5, 97.5])
                 cells.append(f"{res[m].mean() / base[m].mean():.2f}x [{lo:.2f}, {hi:.2f}]")
-            print(f"| {policy} ({len(records)}) | {v} | {e if v != 'random' else '-'} | {res['clusters'].mean():.1f} | "
+            print(f"| {policy} ({len(records)}) | {v}{f' cover {c}' if c else ''}{f' c={cc} r={rr}' if v == 'good-ucb' else ''} | {e if v != 'random' else '-'} | {res['clusters'].mean():.1f} | "
                   f"{res['pairs'].mean():.1f} | {cells[0]} | {cells[1]} |", flush=True)
 
 

@@ -53,13 +53,14 @@ def add_parser(subparsers) -> None:
                    choices=RegisteredNames(registered_samplers, SAMPLERS),
                    help=f"scene sampler (default {MINE.sampler}); split: VerifAI's cross-entropy over which scenario "
                    "and a Halton sequence per scenario over its parameters; novelty-bandit: the scenarios that keep "
-                   "giving failures unlike earlier ones, mixed with uniform, parameters uniform (explore, prior_new, "
-                   "prior_old)")
+                   "giving failures unlike earlier ones, once every scenario had a scene, mixed with uniform, parameters "
+                   "uniform (explore, prior_new, prior_old, cover)")
     p.add_argument("--sampler-options", default=None,
                    help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
                    "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
-                   "warmup (0) and avoid (81: redraws past parameter cells that already failed; 0: off) "
-                   "(see dv2s_gym/mining/sampling/samplers.py)")
+                   "warmup (0) and avoid (81: redraws past parameter cells that already failed; 0: off); novelty-bandit "
+                   "takes explore (0.2), prior_new (2), prior_old (1) and cover (1: scenes of every scenario before "
+                   "the scores rank them) (see dv2s_gym/mining/sampling/samplers.py)")
     p.add_argument("--feedback", choices=list(FEEDBACKS), default=None,
                    help="what adaptive samplers learn from: robustness (every failure), novelty (a failure in a "
                    "parameter cell that already failed counts as an easy scene, to spread the search) or "

@@ -14,8 +14,11 @@ every scenario has to keep a chance.
   failures, ``(new_s + a) / (drawn_s + a + b)`` (a Beta(``a``, ``b``) prior; ties drawn uniformly). ``drawn_s``
   counts scenes drawn, also those not fed back yet, so the scenes drawn ahead of the feedback (the miner's
   window) spread over the best scenarios instead of piling onto one; an untried scenario starts at
-  ``a / (a + b)`` (2/3 with the defaults), above a scenario whose one scene passed (1/2), so every scenario is
-  tried early and one that stops yielding new failures falls back behind the others;
+  ``a / (a + b)`` (2/3 with the defaults), above a scenario whose one scene passed (1/2), and one that stops
+  yielding new failures falls back behind the others. Until every scenario has had ``cover`` scenes (default 1)
+  the non-uniform share goes to the scenarios still short of them instead (uniformly): without it a scenario whose
+  first scenes failed (score 3/4 and up) is drawn again and again before the untried ones get a scene, and on a
+  bank of 32 scenarios and a budget of 60 that costs more distinct failures than it finds;
 - **the parameters**: uniformly over the scenario's own unit box (the scenario's own distribution).
 
 Both steps have a density known at the moment of the draw (:func:`~dv2s_gym.mining.sampling.samplers.proposal_density`:
@@ -41,9 +44,10 @@ from verifai.samplers.feature_sampler import FeatureSampler
 
 __all__ = ["NoveltyBanditSampler", "NOVELTY_DEFAULTS"]
 
-NOVELTY_DEFAULTS = {"explore": 0.2, "prior_new": 2.0, "prior_old": 1.0}
+NOVELTY_DEFAULTS = {"explore": 0.2, "prior_new": 2.0, "prior_old": 1.0, "cover": 1}
 """``explore``: the uniform share of the mixture; ``prior_new``, ``prior_old``: ``a`` and ``b`` of the Beta prior
-of each scenario's rate of new failures (module docstring)."""
+of each scenario's rate of new failures; ``cover``: scenes of every scenario drawn before the scores rank the
+scenarios (0: the scores rank from the first draw) (module docstring)."""
 
 
 class NoveltyBanditSampler(FeatureSampler):
@@ -60,12 +64,13 @@ class NoveltyBanditSampler(FeatureSampler):
     """
 
     def __init__(self, space, dimensions: Sequence[int], explore: float = 0.2, prior_new: float = 2.0,
-                 prior_old: float = 1.0, thres: float = 0.0) -> None:
+                 prior_old: float = 1.0, thres: float = 0.0, cover: int = 0) -> None:
         super().__init__(space)
         self.dimensions = [int(d) for d in dimensions]
         self.width = max(self.dimensions + [1])
         self.explore, self.prior_new, self.prior_old = float(explore), float(prior_new), float(prior_old)
         self.thres = float(thres)
+        self.cover = int(cover)
         count = len(self.dimensions)
         self.drawn = np.zeros(count, dtype=int)
         """Scenes drawn per scenario (fed or not)."""
@@ -78,11 +83,19 @@ class NoveltyBanditSampler(FeatureSampler):
         """Each scenario's estimated rate of new failures (the posterior mean)."""
         return (self.new + self.prior_new) / (self.drawn + self.prior_new + self.prior_old)
 
-    def probabilities(self) -> List[float]:
-        """The distribution the next scenario is drawn from: ``explore`` uniform, the rest on the best scores."""
-        count = len(self.dimensions)
+    def best(self) -> np.ndarray:
+        """The scenarios the non-uniform share goes to: those drawn fewer than ``cover`` times while any is, else
+        the best-scoring ones."""
+        short = np.flatnonzero(self.drawn < getattr(self, "cover", 0))  # a checkpoint from before cover: 0
+        if len(short):
+            return short
         scores = self.scores()
-        best = np.flatnonzero(scores >= scores.max() - 1e-12)
+        return np.flatnonzero(scores >= scores.max() - 1e-12)
+
+    def probabilities(self) -> List[float]:
+        """The distribution the next scenario is drawn from: ``explore`` uniform, the rest on :meth:`best`."""
+        count = len(self.dimensions)
+        best = self.best()
         share = (1.0 - self.explore) / len(best)
         row = [self.explore / count] * count
         for index in best:
@@ -96,8 +109,7 @@ class NoveltyBanditSampler(FeatureSampler):
         if np.random.random() < self.explore:
             index = int(np.random.randint(count))
         else:
-            scores = self.scores()
-            best = np.flatnonzero(scores >= scores.max() - 1e-12)
+            best = self.best()
             index = int(best[np.random.randint(len(best))])
         self.last_probabilities = row
         self.drawn[index] += 1

@@ -216,6 +216,10 @@ def _novelty_params(options: Dict[str, Any]) -> Dict[str, float]:
     for key in ("prior_new", "prior_old"):
         if not params[key] > 0.0:
             raise MiningError(f"sampler option {key} must be > 0 (a Beta prior), not {options.get(key)!r}")
+    if not (params["cover"] >= 0 and params["cover"] == int(params["cover"])) or isinstance(options.get("cover"), bool):
+        raise MiningError(f"sampler option cover must be a whole number >= 0 (scenes of every scenario drawn before "
+                          f"the scores rank them), not {options.get('cover')!r}")
+    params["cover"] = int(params["cover"])
     return params
 
 
@@ -509,7 +513,7 @@ _REGISTRY: Registry[SamplerRecord] = Registry("sampler", MiningError, {
     SPLIT: SamplerRecord(_make_split, _split_params, ("alpha", "buckets", "thres", "chooser", "params", "warmup",
                                                       "avoid"),
                          default_feedback="novelty", adaptive=True, density=_split_density),
-    NOVELTY: SamplerRecord(_make_novelty, _novelty_params, ("explore", "prior_new", "prior_old"),
+    NOVELTY: SamplerRecord(_make_novelty, _novelty_params, ("explore", "prior_new", "prior_old", "cover"),
                            default_feedback="state-novelty", adaptive=True, density=_novelty_density),
 })
 
