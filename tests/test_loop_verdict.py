@@ -99,6 +99,17 @@ def test_a_round_too_small_to_judge_says_so_and_points_to_the_evidence_profile()
     assert failed.verdict == "REJECTED" and failed.too_small is None
 
 
+def test_a_round_already_at_the_evidence_sizes_is_told_to_raise_them_not_to_run_the_evidence_profile():
+    small = _round(1, "INCONCLUSIVE")
+    sizes = {"budget": 240, "k_eval": 10, "regress_episodes": 4}
+    at_evidence = recommendation(_report(small, settings={"policy": "dv2s-ppo", **sizes}))
+    assert "TOO SMALL TO JUDGE" in at_evidence.sentence and "--profile evidence" not in at_evidence.sentence
+    assert "raise --k-eval (now 10) and --regress-episodes (now 4)" in at_evidence.sentence
+    for name in sizes:  # one size below the profile's: the profile is the advice
+        below = recommendation(_report(small, settings={"policy": "dv2s-ppo", **sizes, name: sizes[name] - 1}))
+        assert "dv2s loop --profile evidence" in below.sentence
+
+
 # --------------------------------------------------------------------------- the held-out tests, as the loop records them
 def _episodes(failing):
     """Held-out records of 4 families x 2 scenarios x 4 seeds; ``failing(family, scenario, seed)`` says which fail."""

@@ -34,15 +34,16 @@ import dataclasses
 from typing import TYPE_CHECKING, Any, Dict, Mapping, Optional, Union
 
 from dv2s_gym.loop.record import (FamilyHarm, FamilyHarmRow, FinalVsStart, HeldOutComparison, HeldOutWorse,
-                                  LoopReportBody, RegressComparison, RegressSummary, RoundRecord, RoundSteps, recorded)
-from dv2s_gym.loop.settings import DEFAULTS, LoopError
+                                  LoopReportBody, RecordedLoopSettings, RegressComparison, RegressSummary, RoundRecord,
+                                  RoundSteps, recorded)
+from dv2s_gym.loop.settings import DEFAULTS, EVIDENCE, LoopError
 
 if TYPE_CHECKING:  # the regression statistics load scipy, kept off the command line's start: imported where used
     from dv2s_gym.regress.stats import PairedTable
 
 __all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
            "FAMILY_RULE", "family_harm", "non_inferiority_p",
-           "EVIDENCE_HINT", "EVIDENCE_FLOOR", "fewest_significant_pairs", "evidence_floor_note", "judge_round",
+           "EVIDENCE_HINT", "evidence_hint", "EVIDENCE_FLOOR", "fewest_significant_pairs", "evidence_floor_note", "judge_round",
            "heldout_worse", "too_small", "Judgement", "Recommendation", "recommendation"]
 
 ACCEPTED, REJECTED, NOT_ACCEPTED = "ACCEPTED", "REJECTED", "NOT ACCEPTED"
@@ -94,7 +95,21 @@ def evidence_floor_note(min_episodes: int, min_families: int) -> Optional[str]:
 
 EVIDENCE_HINT = "run `dv2s loop --profile evidence` for a round large enough to judge"
 """What a round too small to judge its policy tells the user to do (the profile of
-:data:`dv2s_gym.loop.settings.EVIDENCE`)."""
+:data:`dv2s_gym.loop.settings.EVIDENCE`), unless it already ran at that profile's sizes (:func:`evidence_hint`)."""
+
+_SIZES = ("budget", "k_eval", "regress_episodes")
+"""The settings that make a round large enough to judge, as the evidence profile sets them."""
+
+
+def evidence_hint(settings: Optional[RecordedLoopSettings]) -> str:
+    """What to run for a round large enough to judge: the evidence profile, or, for a round that already had its
+    sizes (mining budget, held-out seeds, regression seeds per scenario), larger ones than the profile's."""
+    values = dict(settings.extra) if settings is not None else {}
+    sizes = {name: values.get(name) for name in _SIZES}
+    if any(not isinstance(value, int) or value < EVIDENCE[name] for name, value in sizes.items()):
+        return EVIDENCE_HINT
+    return (f"this round already ran at the evidence profile's sizes; raise --k-eval (now {sizes['k_eval']}) and "
+            f"--regress-episodes (now {sizes['regress_episodes']}) for a round large enough to judge")
 
 
 def too_small(record: RoundRecord) -> Optional[str]:
@@ -443,7 +458,7 @@ def recommendation(report: LoopReportBody) -> Recommendation:
                     f"{candidate}: {judged.reason}")
     small = too_small(record) if judged.verdict == NOT_ACCEPTED else None
     if small:
-        sentence += f". TOO SMALL TO JUDGE ({small}): {EVIDENCE_HINT}"
+        sentence += f". TOO SMALL TO JUDGE ({small}): {evidence_hint(report.settings)}"
     return Recommendation(policy=recommended, verdict=judged.verdict, round=number, candidate=candidate,
                           reason=judged.reason, decided_by=judged.decided_by,
                           exit_code=EXIT_CODES[judged.verdict], too_small=small, sentence=sentence)
