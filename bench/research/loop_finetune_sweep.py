@@ -74,14 +74,17 @@ def main() -> None:
     from dv2s_gym.loop.heldout import HeldOutStore, evaluate_heldout, failure_types, paired_summary
     from dv2s_gym.workers.settings import WorkerSettings
     from dv2s_gym.loop.arms import arm_weights
+    from dv2s_gym.loop.state import IN_FOLDER
     from policies.training import EVAL_SEED_BASE, TrainConfig, fine_tune
 
     loop = Path(args.loop)
     state = json.loads((loop / "loop.json").read_text(encoding="utf-8"))
     settings, steps = state["settings"], state["rounds"][0]["steps"]
     held = steps["split"]["held_out"]
-    bank = state["start"]["bank"]
-    policy, env_config = settings["policy"], dict(settings["env_config"])
+    # loop.json writes paths inside the loop folder relative to it (a moved loop folder resumes)
+    inside = lambda value: value.replace(f"{IN_FOLDER}/", f"{loop.resolve()}/")  # noqa: E731
+    bank = inside(state["start"]["bank"])
+    policy, env_config = inside(settings["policy"]), dict(settings["env_config"])
     episodes = [(name, EVAL_SEED_BASE + i) for name in held for i in range(settings["k_eval"])]
     base = Path(args.out)
     began = time.perf_counter()
