@@ -75,11 +75,12 @@ class DuplicateScenarioError(BankError):
 
 class NearDuplicateWarning(UserWarning):
     """A warning, not an error: an entry was added whose script is a near-duplicate of other entries (the same map
-    and elements, overlapping parameter ranges; :func:`scenario_bank.dedup.near_duplicate`). Mining and the loop
-    count them as one scenario family. ``name``: the new entry; ``twins``: the entries it is a near-duplicate of."""
+    and elements, overlapping parameter ranges; :func:`scenario_bank.dedup.near_duplicate`) or a near-copy of them
+    (at most two lines of code apart; :func:`scenario_bank.families.twins`). Mining and the loop count them as one
+    scenario family. ``name``: the new entry; ``twins``: the entries it is a near-duplicate of."""
 
-    WHY = ("(same map and elements, overlapping parameter ranges): mining and dv2s loop count them as one scenario "
-           "family")
+    WHY = ("(same map and elements with overlapping parameter ranges, or at most two lines of code apart): mining and "
+           "dv2s loop count them as one scenario family")
 
     def __init__(self, name: str, twins: Sequence[str]) -> None:
         super().__init__(f"{name} is a near-duplicate of bank entr{'y' if len(twins) == 1 else 'ies'} "

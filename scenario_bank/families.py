@@ -1,9 +1,12 @@
 """A bank's scenario families by lineage and by content: :func:`content_families`.
 
 A scenario's family is the end of its ``source.parent`` chain (the first scenario with no parent in the bank).
-Two entries whose scripts are near-duplicates (:func:`scenario_bank.dedup.near_duplicate`: the same map and
-elements, overlapping numeric parameter ranges) are one family too, whatever their lineage: holding out one of
-them while fine-tuning on the other would test on what was trained on. A family is named by the first (sorted)
+Two entries whose scripts are twins (:func:`twins`) are one family too, whatever their lineage: near-duplicates
+(:func:`scenario_bank.dedup.near_duplicate`: the same map and elements, overlapping numeric parameter ranges), or
+near-copies (:func:`scenario_bank.dedup.changed_code_lines`: at most :data:`~scenario_bank.dedup.NEAR_COPY_LINES`
+lines of code apart, whatever their elements say and however far apart the ranges of a changed line lie: the same
+program with one range moved, or with other elements declared, plays the same story). Holding out one of them while
+fine-tuning on the other would test on what was trained on. A family is named by the first (sorted)
 lineage root it joins, so a bank without near-duplicates keeps every family's name.
 """
 
@@ -11,9 +14,9 @@ from __future__ import annotations
 
 from typing import Any, Dict, Iterable, List
 
-from scenario_bank.dedup import near_duplicate
+from scenario_bank.dedup import NEAR_COPY_LINES, changed_code_lines, near_duplicate
 
-__all__ = ["UnionFind", "lineage_root", "content_families", "near_duplicates_of"]
+__all__ = ["UnionFind", "lineage_root", "content_families", "near_duplicates_of", "twins"]
 
 
 class UnionFind:
@@ -65,8 +68,16 @@ def _twins(scripts: Dict[str, Any]) -> Iterable[tuple]:
         first, script = scripts[name]
         for other in names[i + 1:]:
             second, other_script = scripts[other]
-            if near_duplicate(first.elements, first.map, script, second.elements, second.map, other_script):
+            if twins(first, script, second, other_script):
                 yield name, other
+
+
+def twins(first: Any, script: str, second: Any, other_script: str) -> bool:
+    """Whether two bank entries (with their scripts) are one scenario for held-out purposes: near-duplicates (the same
+    map and elements, overlapping parameter ranges) or near-copies (at most ``NEAR_COPY_LINES`` lines of code apart)."""
+    if near_duplicate(first.elements, first.map, script, second.elements, second.map, other_script):
+        return True
+    return changed_code_lines(script, other_script) <= NEAR_COPY_LINES
 
 
 def content_families(bank: Any) -> Dict[str, str]:
@@ -87,5 +98,4 @@ def near_duplicates_of(bank: Any, name: str) -> List[str]:
     if name not in scripts:
         return []
     entry, script = scripts.pop(name)
-    return sorted(other for other, (second, other_script) in scripts.items()
-                  if near_duplicate(entry.elements, entry.map, script, second.elements, second.map, other_script))
+    return sorted(other for other, (second, other_script) in scripts.items() if twins(entry, script, second, other_script))
