@@ -257,3 +257,26 @@ def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tm
                           policy="keep_lane", settings=MineSettings())
     miner.convert_clusters(run, ConversionSettings(), bank_dir=str(tmp_path / "bank"), progress=False)
     assert sorted(taken) == [1, 2]
+
+
+def test_a_failure_in_a_scenario_with_a_discrete_parameter_is_kept_and_replays(tmp_path):
+    """A parameter drawn from a set of numbers (``Uniform(8, 10, 12)``) is fixed in the replay script at its failing
+    value; the replay then conditions on the parameters the script still draws, and plays the failing episode."""
+    from dv2s_gym.mining.sampling.space import SceneSpace
+
+    script = Bank().get(SCENARIO).script.replace("param ego_speed = Range(8, 13)", "param ego_speed = Uniform(8, 10, 12)")
+    assert "Uniform(8, 10, 12)" in script
+    bank = Bank(tmp_path / "bank")
+    bank.add(script, Sidecar(description="A car stands still in the ego's lane ahead.", name="discrete_stopped_car",
+                             elements=Bank().get(SCENARIO).elements))
+    params = {name: r.from_unit(0.5) for name, r in
+              SceneSpace(["discrete_stopped_car"], bank_dir=str(bank.root)).param_ranges("discrete_stopped_car").items()}
+    assert params["ego_speed"] in (8, 10, 12)
+    record = make_record("discrete_stopped_car", 0, params, bank_dir=str(bank.root))
+    settings = ConversionSettings(policy="keep_lane", monitor={}, bank_dir=str(bank.root))
+    out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", settings, bank=bank)
+    assert out.status == "kept" and out.replay_entry is not None, out
+    entry = Bank(bank.root).get(out.replay_entry)
+    assert f"param ego_speed = {params['ego_speed']!r}" in entry.script or \
+        f"param ego_speed = {int(params['ego_speed'])}" in entry.script
+    assert replay_failure(Bank(bank.root), out.replay_entry).get("matches") is True

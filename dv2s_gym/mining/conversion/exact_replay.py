@@ -36,7 +36,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple, Union
 from policies.registry import parse_spec, load_policy, spec_from_file
 from policies.evaluation import run_episode
 
-__all__ = ["NARROW", "REPLAY_TAG", "narrowed_script", "replay_name", "run_replay", "replay_failure",
+__all__ = ["NARROW", "REPLAY_TAG", "narrowed_script", "conditioned_params", "replay_name", "run_replay", "replay_failure",
            "ReplayOutcome", "replay_versions", "mismatch_reason"]
 
 NARROW = 0.02
@@ -111,6 +111,14 @@ def narrowed_script(script: str, params: Mapping[str, Any], narrow: float = NARR
                              f"({support_text(parts)}), so it keeps the parent's")
     skipped.update(inline_draws(script, taken=skipped))
     return "".join(lines), intervals, skipped
+
+
+def conditioned_params(params: Mapping[str, Any], intervals: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+    """The failing ``params`` a run of the narrowed script conditions on: all but those :func:`narrowed_script` fixed
+    in the script (``intervals[name]`` one value), which the script no longer draws and Scenic cannot condition."""
+    fixed = {name for name, span in (intervals or {}).items()
+             if isinstance(span, (list, tuple)) and len(span) == 2 and span[0] == span[1]}
+    return {name: value for name, value in params.items() if name not in fixed}
 
 
 _RANDOM = re.compile(r"\b(Range|Uniform|Normal|TruncatedNormal|Options|Discrete|DiscreteRange|VerifaiRange|"
@@ -239,7 +247,8 @@ def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
     if policy is None:
         policy = spec_from_file(replay.get("policy"), f"the provenance of bank entry {name!r}", "policy=SPEC")
     result, trace, failure = run_replay(str(entry.script_path), policy=policy,
-                                        seed=int(replay["seed"]), params=replay.get("params") or {},
+                                        seed=int(replay["seed"]),
+                                        params=conditioned_params(replay.get("params") or {}, replay.get("intervals")),
                                         env_config=env_config, monitor=monitor)
     matches = result.trajectory_hash == replay.get("trajectory_hash")
     reason = None if matches else (f"replay entry {name!r} did not replay the recorded failing episode "

@@ -20,7 +20,8 @@ from dv2s_gym.mining.conversion.files import (cluster_slug, CONVERSION_DIR, ENTR
 from dv2s_gym.mining.conversion.record import ConversionStatus, ReplayRow
 from dv2s_gym.mining.conversion.rejection import check_settings, ConversionRejected, SETUP_ERRORS, stage_error
 from dv2s_gym.mining.conversion.settings import ConversionSettings
-from dv2s_gym.mining.conversion.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
+from dv2s_gym.mining.conversion.exact_replay import (conditioned_params, narrowed_script, replay_name, REPLAY_TAG,
+                                                     replay_versions, run_replay)
 from dv2s_gym.mining.conversion.interaction import failure_interaction, FailureInteraction, interaction_sentence
 from dv2s_gym.pipeline.metrics import e2e_sc
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
@@ -93,7 +94,8 @@ def _run_narrowed(record: EpisodeRecord, parent: Any, params: Dict[str, Any], se
     folder = source.run_dir / "failures" / cluster_slug(source.cluster, record.index) / CONVERSION_DIR
     path = folder / "replay.scenic"
     write_run_file(path, script)
-    result, trace, failure = run_replay(path, policy=settings.policy, seed=seed, params=params,
+    result, trace, failure = run_replay(path, policy=settings.policy, seed=seed,
+                                        params=conditioned_params(params, intervals),
                                         env_config=settings.env_config, monitor=settings.monitor)
     if result.trajectory_hash != expected:
         raise ConversionRejected("replay", f"the parent {record.scenario!r} narrowed around the failing parameters "
