@@ -386,6 +386,10 @@ def test_an_untouched_set_the_start_failed_entirely_is_called_vacuous_in_the_ver
     assert "non-inferiority against it is vacuous" in verdict.reason
     lines = _untouched_lines(UntouchedComparison.from_dict({"scenarios": ["a"], "seeds": 6, "policies": policies(6)}))
     assert any(line.startswith("- **WARNING: the starting policy failed every untouched episode") for line in lines)
+    record["steps"]["regress"]["verdict"] = "INCONCLUSIVE"  # whatever decides, the vacuous set is named
+    held_back = recommendation(_report(record))
+    assert held_back.verdict == "NOT ACCEPTED" and "non-inferiority against it is vacuous" in held_back.reason
+    record["steps"]["regress"]["verdict"] = "PASS"
     record["steps"]["untouched"]["policies"] = policies(5)  # one passed: the comparison can fail, so it says something
     assert "vacuous" not in recommendation(_report(record)).reason
     lines = _untouched_lines(UntouchedComparison.from_dict({"scenarios": ["a"], "seeds": 6, "policies": policies(5)}))

@@ -438,9 +438,22 @@ def test_breadth_counts_and_their_text(report):
     # A: collision, low_ttc; B: off_road, collision, stall
     assert counts["scenario_failure_types"] == 5 and counts["scenarios_failing"] == 2
     assert report.to_dict()["scenarios"]["A"]["failure_types"] == 2 and report.to_dict()["scenarios"]["B"]["failure_types"] == 3
+    assert (counts["collisions"], counts["stalls"]) == (5, 1)
     line = ("10 failure(s): 5 distinct behaviour(s), 5 (scenario family, failure type) pair(s), 2 scenario "
-            "famil(ies) with a failure; by type: collision 5, off road 3, low_ttc 1, stall 1")
+            "famil(ies) with a failure; by type: collision 5, off road 3, low_ttc 1, stall 1; collisions 5, stalls 1")
     assert line in format_summary(report) and line in markdown(report)
+
+
+def test_a_report_without_stalls_says_zero_stalls_apart_from_collisions(tmp_path):
+    """A reader of the saved report tells "0 stalls" from "not counted": the counts and every form say it."""
+    run = make_run(tmp_path / "run", clips=False)
+    lines = (run / "episodes.jsonl").read_text().splitlines()
+    kept = [line for line in lines if '"stall"' not in line]
+    assert len(kept) < len(lines)
+    (run / "episodes.jsonl").write_text("".join(line + "\n" for line in kept))
+    report = build_report(run)
+    assert (report.to_dict()["counts"]["collisions"], report.to_dict()["counts"]["stalls"]) == (5, 0)
+    assert "collisions 5, stalls 0" in markdown(report) and "collisions 5, stalls 0" in format_summary(report)
 
 
 def test_the_rate_estimate_needs_every_proposal_density(report):

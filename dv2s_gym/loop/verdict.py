@@ -272,8 +272,16 @@ def judge_round(record: RoundRecord) -> Optional[Judgement]:
     """The verdict on round ``record``'s fine-tuned policy (module docstring; a
     :class:`~dv2s_gym.loop.record.RoundRecord`, its JSON object read with ``RoundRecord.from_dict``), a
     :class:`Judgement`; ``None`` when the round fine-tuned none."""
-    found = _judged(RoundRecord.from_dict(record))
-    return None if found is None else Judgement(**found)
+    record = RoundRecord.from_dict(record)
+    found = _judged(record)
+    if found is None:
+        return None
+    # a vacuous untouched set is named whatever decided: a reader must not take its silence for a pass
+    untouched = record.steps.untouched
+    vacuous = untouched.vacuous() if untouched is not None else None
+    if vacuous:
+        found["reason"] += f"; on the untouched set {vacuous}"
+    return Judgement(**found)
 
 
 def _judged(record: RoundRecord) -> Optional[Dict[str, str]]:
@@ -334,9 +342,6 @@ def _judged(record: RoundRecord) -> Optional[Dict[str, str]]:
     margin = tests["start"].family_harm.margin  # the test against the start always ran here (else missing)
     control_note += (f"; no held-out family worse for the fine-tuned policy by more than the margin "
                      f"{100 * margin:+.1f} pp ({FAMILY_RULE})")
-    vacuous = steps.untouched.vacuous() if steps.untouched is not None else None
-    if vacuous:
-        control_note += f"; on the untouched set {vacuous}"
     return {"verdict": ACCEPTED, "decided_by": "all",
             "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.reason}); on "
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}

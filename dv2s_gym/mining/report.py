@@ -21,7 +21,8 @@ JSON schema ``dv2s-mine-report``, version 3 (:data:`SCHEMA_VERSION`; a change to
       "counts": {
         "episodes": finished episodes without an error, "errors": episodes that ended in an error,
         "worker_restarts": episodes finished by a new worker after theirs crashed or hung,
-        "failures": episodes with a failure, "failures_by_type": {type: n},
+        "failures": episodes with a failure, "failures_by_type": {type: n}, "collisions", "stalls": failures of a
+        type that is the ego touching an actor / standing (zero included),
         "avoidable": failures the reference driver avoided in the same scene (they count against the policy),
         "unavoidable": failures the reference driver had too, "avoidability_unknown": no reference outcome,
         "clusters": distinct clusters (behaviours, :mod:`dv2s_gym.mining.cluster`), "behaviours": the same count,
@@ -115,7 +116,7 @@ from dv2s_gym.mining.report_text import percent_text as _pct
 from policies.run_identity import installed_version
 from policies.stats import Rate
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
-from scenario_bank.failure_types import FAILURE_TYPES, severity_order
+from scenario_bank.failure_types import FAILURE_TYPES, is_contact, is_standstill, severity_order
 from scenario_bank.records import EpisodeRecord, RecordError
 
 __all__ = [
@@ -402,6 +403,8 @@ def _failure_counts(ok: Sequence[EpisodeRecord], errors: Sequence[EpisodeError],
         "worker_restarts": len(restarts),
         "failures": len(failures),
         "failures_by_type": _by_type(failures),
+        "collisions": sum(is_contact(str(f.type)) for f in failures),
+        "stalls": sum(is_standstill(str(f.type)) for f in failures),
         "avoidable": sum(f.avoidable is True for f in failures),
         "unavoidable": sum(f.avoidable is False for f in failures),
         "avoidability_unknown": sum(f.avoidable is None for f in failures),

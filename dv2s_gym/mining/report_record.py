@@ -46,6 +46,10 @@ class MineCounts(JsonRecord):
     worker_restarts: int = 0
     failures: int = 0
     failures_by_type: Mapping[str, int] = field(default_factory=dict)
+    collisions: Optional[int] = None
+    """Failures of a type that is the ego touching an actor (``None`` in a report written before they were counted)."""
+    stalls: Optional[int] = None
+    """Failures of a type that is the ego standing (``None`` in a report written before they were counted)."""
     avoidable: int = 0
     unavoidable: int = 0
     avoidability_unknown: int = 0

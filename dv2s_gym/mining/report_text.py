@@ -119,11 +119,13 @@ def by_type_text(by_type: Mapping[str, int]) -> str:
 
 def breadth(counts: MineCounts) -> str:
     """How broad the failures found are: failures, distinct behaviours, (scenario, failure type) pairs, scenarios
-    with a failure, and the failures per type (:func:`by_type_text`)."""
+    with a failure, the failures per type (:func:`by_type_text`), and collisions and stalls apart (zero included)."""
+    apart = "" if counts.collisions is None or counts.stalls is None else \
+        f"; collisions {counts.collisions}, stalls {counts.stalls}"
     return (f"{counts.failures} failure(s): {counts.behaviours} distinct behaviour(s), "
             f"{counts.scenario_failure_types} (scenario family, failure type) pair(s), "
             f"{counts.scenarios_failing} scenario famil(ies) with a failure; by type: "
-            f"{by_type_text(counts.failures_by_type or {})}")
+            f"{by_type_text(counts.failures_by_type or {})}{apart}")
 
 
 def rate_text(rate: Optional[Mapping[str, Any]]) -> str:
