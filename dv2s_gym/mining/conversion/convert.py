@@ -13,7 +13,9 @@ conversion record of ``conversions.jsonl``:
    (:mod:`dv2s_gym.mining.conversion.exact_replay`): the parent script narrowed around the failing parameters, tagged
    ``replay``, its provenance ``replay`` holding the parameters, seed and trajectory hash that pin the
    scene; it is checked to replay the recorded episode step for step first (else a ``replay`` rejection);
-4. ``describe``: the Driving Record Analyzer turns the video into a description, and the trace's account of
+4. ``describe``: the Driving Record Analyzer turns the video into a description; what it says of a collision the
+   trace does not record is taken out (:func:`~dv2s_gym.mining.conversion.traced_collisions.keep_traced_collisions`:
+   a red, crashed obstacle read as a crashed car is no car collision), and the trace's account of
    the interaction is added to it (:func:`~dv2s_gym.mining.conversion.interaction.interaction_sentence`), so the
    description names what caused the failure even when the clip does not show it;
 5. ``generate``: the Scenario Generator turns the description into a Scenic script;
@@ -84,7 +86,8 @@ from dv2s_gym.mining.conversion.replay import (add_replay, link_entries, replay_
                                                ReplaySource)
 from dv2s_gym.mining.conversion.settings import ConversionSettings
 from dv2s_gym.mining.conversion.failure_video import write_failure_video, write_script_episode_video
-from dv2s_gym.mining.conversion.interaction import failure_interaction, interaction_sentence
+from dv2s_gym.mining.conversion.interaction import failure_interaction
+from dv2s_gym.mining.conversion.traced_collisions import failure_description
 from dv2s_gym.pipeline import stages
 from dv2s_gym.pipeline.convert import check_scenario, conversion_provenance
 from dv2s_gym.pipeline.metrics import e2e_sc
@@ -293,9 +296,14 @@ class _Conversion:
         s = self.settings
         description = stages.describe(self.video, backend=s.dra, llm_config=s.llm_config)
         self.details["dra_description"] = description.text
-        events = interaction_sentence(self.interaction, known=description.elements) if s.describe_events else ""
-        if events:  # what the trace says caused the failure, even where the clip does not show it
-            description.text = f"{description.text.strip()} {events}"
+        # held to the trace: no collision it does not record; what it says caused the failure added, even where
+        # the clip does not show it
+        traced = failure_description(description.text, self.source_trace,
+                                     self.interaction if s.describe_events else None)
+        if traced.removed:
+            self.details["untraced_collisions"] = traced.removed
+        if traced.text != description.text:
+            description.text = traced.text
             description.elements = elements_from_text(description.text)
         self.out["description"] = description.text
         write_run_file(self.conversion / "description.txt", description.text.strip() + "\n")
