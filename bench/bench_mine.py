@@ -256,12 +256,14 @@ def bench_breadth(policies: Sequence[str], samplers: Sequence[str], seeds: Seque
         for sampler in samplers:
             got = rows[(policy, sampler)]
             means = {m: statistics.mean(r[m] for r in got) for m in BREADTH}
-            ratios = {m: (means[m] / base[m] if base and base[m] else float("nan")) for m in BREADTH}
+            ratios = {m: (means[m] / base[m] if base and base[m] else None) for m in BREADTH}
             summary["per_policy"][(policy, sampler)] = {"means": means, "ratios": ratios,
                                                         "failures": statistics.mean(r["failures"] for r in got)}
             print(f"| {policy} | {sampler} | {statistics.mean(r['failures'] for r in got):.1f} | "
                   + " | ".join(f"{means[m]:.1f} ({', '.join(str(r[m]) for r in got)})" for m in BREADTH) + " | "
-                  + " | ".join(f"{ratios[m]:.2f}x" for m in BREADTH) + " |")
+                  + " | ".join("-" if ratios[m] is None else f"{ratios[m]:.2f}x" for m in BREADTH) + " |")
+    if "random" not in samplers:
+        print("\nno ratios to random: add random to --samplers for them", flush=True)
     if "random" in samplers:
         print("\nover all policies and seeds (sum over runs, ratio to random at the same budget):")
         totals = {s: {m: sum(r[m] for p in policies for r in rows[(p, s)]) for m in BREADTH} for s in samplers}
