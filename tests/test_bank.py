@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+import envs  # noqa: F401  (adding to a bank checks the script in the simulator, which importing envs loads)
 from scenario_bank.bank import (
     BANK_VERSION,
     Bank,
@@ -96,29 +97,37 @@ def test_duplicates_are_refused_with_the_existing_name(bank):
 
 
 @pytest.mark.slow
-def test_scripts_whose_elements_name_nothing_compare_by_their_bytes_and_shared_parameters(bank):
+def test_scripts_whose_elements_name_nothing_compare_by_their_bytes_shared_parameters_and_code(bank):
     """A hand-added script without elements says nothing of its scene: two different such scripts on one map are no
-    semantic duplicates whatever their params, and near-duplicates (one family) only through a parameter in common
-    whose ranges overlap; two without any parameter in common are not alike at all."""
+    semantic duplicates whatever their params; they are one family (a near-duplicate warning) through a parameter in
+    common whose ranges overlap, or when their code is at most two lines apart (a near-copy); another program without
+    a parameter in common is not alike at all."""
     import warnings
     from scenario_bank.errors import NearDuplicateWarning
 
     empty = {"road": None, "participants": [], "actions": [], "relations": []}
     slow = SCRIPT.replace("param gap = Range(10, 30)\n", "").replace("globalParameters.gap", "Range(10, 30)")
     bank.add(slow.format(speed=15), Sidecar(description="a slow car ahead", name="slow_car", elements=empty))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", NearDuplicateWarning)
+    with pytest.warns(NearDuplicateWarning, match="slow_car"):  # one line apart: a near-copy
         assert bank.add(slow.format(speed=0), Sidecar(description="a stopped car", name="stopped_car",
                                                       elements=empty)).name == "stopped_car"
     with pytest.raises(DuplicateScenarioError, match="byte-for-byte identical.*slow_car"):
         bank.add(slow.format(speed=15), Sidecar(description="the same bytes", name="again", elements=empty))
+    crowd = (slow.format(speed=15) + "behind = new Car following roadDirection from ego for -15\n"
+             + "far = new Car following roadDirection from ego for 60\n"
+             + "farther = new Car following roadDirection from ego for 90\n")
+    with warnings.catch_warnings():  # three lines more and no parameter in common: not alike
+        warnings.simplefilter("error", NearDuplicateWarning)
+        assert bank.add(crowd, Sidecar(description="cars ahead and behind", name="crowd",
+                                       elements=empty)).name == "crowd"
     # with a parameter in common whose ranges overlap, they are near-duplicates: one scenario family
     bank.add(script(15), Sidecar(description="a lead at a gap", name="gap_lead", elements=empty))
     with pytest.warns(NearDuplicateWarning, match="gap_lead"):
         bank.add(script(5).replace("Range(10, 30)", "Range(20, 40)"),
                  Sidecar(description="a slower lead at a gap", name="gap_lead_slow", elements=empty))
-    assert bank.add(script(5).replace("Range(10, 30)", "Range(50, 60)"),
-                    Sidecar(description="a slower lead far off", name="gap_far", elements=empty)).name == "gap_far"
+    with pytest.warns(NearDuplicateWarning, match="gap_lead"):  # ranges apart, but two lines of code: a near-copy
+        assert bank.add(script(5).replace("Range(10, 30)", "Range(50, 60)"),
+                        Sidecar(description="a slower lead far off", name="gap_far", elements=empty)).name == "gap_far"
 
 
 @pytest.mark.slow
